@@ -1,0 +1,25 @@
+"""``python -m nerif [overrides]``: one reconstruction, or a multirun with ``-m``."""
+import logging
+import sys
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig
+
+from nerif.app import run
+
+
+@hydra.main(version_base=None, config_path="../conf", config_name="config")
+def main(cfg: DictConfig) -> float:
+    try:
+        metrics = run(cfg, HydraConfig.get().runtime.output_dir)
+    except (ValueError, KeyError, FileNotFoundError, RuntimeError) as e:
+        logging.getLogger("nerif").error("%s", e.args[0] if e.args else e)
+        if HydraConfig.get().mode.name == "MULTIRUN":
+            return float("nan")
+        sys.exit(2)
+    return metrics.get("temperature_rmse_K", metrics["deflection_rmse"])
+
+
+if __name__ == "__main__":
+    main()

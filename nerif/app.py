@@ -1,0 +1,128 @@
+"""One reconstruction from a resolved config: build the parts, train, write every output of the run."""
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from nerif.data import DATASETS
+from nerif.export import write_json, write_npz, write_vti
+from nerif.field import build_field
+from nerif.losses import AmbientBoundary
+from nerif.masks import MASKS
+from nerif.plots import curves_figure, save_figure, slice_figure
+from nerif.renderers import SAMPLERS
+from nerif.trainer import Trainer
+
+log = logging.getLogger(__name__)
+
+
+def resolve_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    dev = torch.device(name)
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise RuntimeError(f"device={name} was asked for but no CUDA GPU is available; use device=cpu or auto")
+    return dev
+
+
+def run(cfg: DictConfig, out_dir: Path) -> dict:
+    """Reconstruct the configured scene into ``out_dir``; returns the final metrics."""
+    t_start = time.perf_counter()
+    out_dir = Path(out_dir)
+    device = resolve_device(cfg.device)
+    torch.manual_seed(cfg.seed)
+    # every check that can fail happens here, before any training
+    sampler = SAMPLERS.build(cfg.sampler)
+    scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device=str(device))
+    field = build_field(cfg, scene.box, gate=MASKS.build(cfg.mask, scene=scene)).to(device)
+    tc = cfg.train
+    boundary = AmbientBoundary(scene.box, list(cfg.loss.ambient_faces), cfg.loss.ambient_weight, cfg.loss.ambient_points)
+    trainer = Trainer(field, scene, sampler, dict(cfg.grad.weights), iterations=tc.iterations, boundary=boundary,
+                      rays_per_view=tc.rays_per_view, lr=tc.lr, betas=tuple(tc.betas), eps=tc.eps, lr_min=tc.lr_min,
+                      eval_rays_per_view=tc.eval_rays_per_view, flame_threshold_K=cfg.metrics.flame_threshold_K,
+                      seed=cfg.seed)
+    checkpoint = out_dir / "checkpoint.pt"
+    if tc.resume:
+        trainer.load(Path(tc.resume))
+        log.info("resumed from %s at iteration %d", tc.resume, trainer.iteration)
+    setup_s = time.perf_counter() - t_start
+
+    from torch.utils.tensorboard import SummaryWriter
+
+    writer = SummaryWriter(log_dir=str(out_dir / "tensorboard"))
+    losses: list[tuple[int, float]] = []
+
+    def on_step(it: int, terms: dict) -> None:
+        losses.append((it, terms["loss"]))
+        if it % 10 == 0:
+            for k, v in terms.items():
+                writer.add_scalar(f"train/{k}", v, it)
+            writer.add_scalar("train/lr", trainer.optimizer.param_groups[0]["lr"], it)
+
+    def on_eval(m: dict) -> None:
+        it = m["iteration"]
+        for k, v in m.items():
+            if k != "iteration":
+                writer.add_scalar(f"eval/{k}", v, it)
+        if scene.truth_T is not None and (it % tc.image_every == 0 or it == trainer.iterations):
+            T = scene.ambient.temperature_from_sigma(trainer.reconstruction())
+            writer.add_figure("slices", slice_figure(T, scene.box, scene.truth_T, f"iteration {it}"), it)
+        writer.flush()
+
+    log.info("%s: %d views, %d rays; field %s, grad %s, %d parameters, device %s", cfg.data.name, scene.n_views,
+             len(scene.dirs), cfg.encoder.name, cfg.grad.name, sum(p.numel() for p in field.parameters()), device)
+    try:
+        trainer.fit(eval_every=tc.eval_every, checkpoint_every=tc.checkpoint_every, checkpoint=checkpoint,
+                    on_eval=on_eval, on_step=on_step, progress=tc.progress)
+    finally:
+        writer.close()
+
+    metrics = write_outputs(trainer, scene, cfg, out_dir, losses)
+    metrics.update(setup_time_s=setup_s, device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
+    write_json(metrics, out_dir / "metrics.json")
+    print(summary_line(metrics, out_dir), flush=True)
+    return metrics
+
+
+def write_outputs(trainer: Trainer, scene, cfg: DictConfig, out_dir: Path, losses) -> dict:
+    """Volumes (.npz, .vti), slice and curve PNGs, and the metrics of the final state."""
+    amb, box = scene.ambient, scene.box
+    sigma = trainer.reconstruction()
+    delta = sigma * amb.delta_thre
+    n = amb.n_from_sigma(sigma)
+    T = amb.temperature_from_sigma(sigma)
+    origin = [float(a[0]) for a in box.axes()]
+    vols = {"T": T, "n": n, "delta": delta, "sigma": sigma}
+    if scene.truth_T is not None:
+        vols["T_true"] = scene.truth_T
+    write_npz(out_dir / "reconstruction.npz", voxel_mm=box.voxel_mm, origin_mm=np.asarray(origin), T0=amb.T0, n0=amb.n0,
+              delta_thre=amb.delta_thre, **vols)
+    write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, **vols)
+    save_figure(slice_figure(T, box, scene.truth_T, f"{cfg.encoder.name} + {cfg.grad.name}, "
+                             f"{trainer.iteration} iterations"), out_dir / "slices.png")
+    save_figure(curves_figure(trainer.history, losses), out_dir / "curves.png")
+    final = dict(trainer.history[-1]) if trainer.history else trainer.evaluate()
+    final.pop("iteration", None)
+    final.update(trainer.timing())
+    final["wall_time_s"] = trainer.train_seconds
+    final["samples_per_ray_mean"] = trainer.sampler.samples_per_ray
+    final["history"] = trainer.history
+    final["encoder"], final["grad"] = cfg.encoder.name, cfg.grad.name
+    if scene.truth_T is not None:
+        final["temperature_note"] = ("temperature from n assuming an air-dominated gas of fixed composition "
+                                     "(n - 1 = T0 (n0 - 1) / T)")
+    return final
+
+
+def summary_line(m: dict, out_dir: Path) -> str:
+    parts = []
+    if "temperature_rmse_K" in m:
+        parts.append(f"T RMSE {m['temperature_rmse_K']:.1f} K (flame {m['temperature_rmse_flame_K']:.1f} K)")
+    parts.append(f"deflection RMSE {m['deflection_rmse']:.3g} rad")
+    parts.append(f"{m['iterations']} it in {m['wall_time_s']:.0f} s ({m['ms_per_iteration']:.1f} ms/it)")
+    return "nerif: " + " | ".join(parts) + f" | {out_dir}"

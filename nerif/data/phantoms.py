@@ -1,0 +1,138 @@
+"""Temperature phantoms on a probe box: analytic Phantom 5, a Gaussian blob, and volumes loaded from files.
+
+Each phantom builder returns a :class:`Phantom`: a temperature volume (nx, ny, nz) [K] on its probe box,
+with the ambient state that converts it to refractive index.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+import torch
+
+from nerif.geometry import ProbeBox
+from nerif.physics import check_temperature, delta_from_n, n_from_delta, n_from_temperature, temperature_from_n
+from nerif.registry import Registry
+
+PHANTOMS = Registry("phantom")
+
+
+@dataclass
+class Phantom:
+    """Attributes: T (nx, ny, nz) [K]; box; T0 [K]; n0; name."""
+
+    T: np.ndarray
+    box: ProbeBox
+    T0: float
+    n0: float
+    name: str
+
+    def __post_init__(self):
+        if self.T.ndim != 3:
+            raise ValueError(f"phantom '{self.name}' must be a 3-D volume (nx, ny, nz), got shape {self.T.shape}")
+        if tuple(self.T.shape) != tuple(self.box.shape):
+            raise ValueError(f"phantom '{self.name}' has shape {self.T.shape} but its box is {self.box.shape}")
+        check_temperature(self.T, f"phantom '{self.name}'")
+
+    @property
+    def delta(self) -> np.ndarray:
+        return delta_from_n(n_from_temperature(self.T, self.T0, self.n0), self.n0)
+
+
+def phantom5_temperature(x, y, z):
+    """The paper's analytic Phantom 5 [K] at coordinates [mm] (box x, z in [-36, 36], y in [-50, 50])."""
+    def g(x, y, z):
+        return np.exp(-(((3 * z**2 + 3 * x**2) / 20**2 + 3 * y**2 / 80**2 - 0.9) ** 2))
+
+    return (296.15 + 1196.85 * g(x, y - 50, z)
+            + 696.85 * (g(x, y - 50, z - 25) + g(x, y - 50, z + 25) + g(x, y + 50, z - 25) + g(x, y + 50, z + 25)))
+
+
+@PHANTOMS.register("phantom5")
+def phantom5(shape: Sequence[int] = (144, 200, 144), voxel_mm: float = 0.5, T0: float = 296.15,
+             n0: float = 1.00027) -> Phantom:
+    """Phantom 5 of the paper sampled at voxel centres (paper grid: 144 x 200 x 144 voxels of 0.5 mm)."""
+    box = ProbeBox(tuple(shape), voxel_mm)
+    c = box.centres()
+    return Phantom(phantom5_temperature(c[..., 0], c[..., 1], c[..., 2]), box, T0, n0, "phantom5")
+
+
+@PHANTOMS.register("gaussian_blob")
+def gaussian_blob(shape: Sequence[int] = (48, 48, 48), voxel_mm: float = 1.0, centre_mm=(0.0, 0.0, 0.0),
+                  width_mm: float = 6.0, T_peak: float = 1200.0, T0: float = 296.15, n0: float = 1.00027) -> Phantom:
+    """A blob Gaussian in refractive index: ``delta = delta_peak exp(-|p - c|^2 / (2 w^2))``, with
+    ``delta_peak`` that of ``T_peak``; its deflection is known in closed form (:func:`gaussian_blob_deflection`)."""
+    box = ProbeBox(tuple(shape), voxel_mm)
+    r2 = ((box.centres() - np.asarray(centre_mm)) ** 2).sum(-1)
+    d_peak = delta_from_n(n_from_temperature(T_peak, T0, n0), n0)
+    T = temperature_from_n(n_from_delta(d_peak * np.exp(-r2 / (2 * width_mm**2)), n0), T0, n0)
+    return Phantom(T, box, T0, n0, "gaussian_blob")
+
+
+def gaussian_blob_deflection(origins: torch.Tensor, dirs: torch.Tensor, centre_mm, width_mm: float,
+                             delta_peak: float) -> torch.Tensor:
+    """Closed-form deflection of an unbounded Gaussian blob of delta along straight rays.
+
+    ``eps = -delta_peak sqrt(2 pi) / w * q exp(-|q|^2 / (2 w^2))`` with q the vector from the blob centre to
+    the ray's closest point. origins, dirs (R, 3) -> (R, 3) [rad].
+    """
+    c = torch.as_tensor(centre_mm, dtype=dirs.dtype, device=dirs.device)
+    rel = origins - c
+    q = rel - (rel * dirs).sum(-1, keepdim=True) * dirs
+    q2 = (q * q).sum(-1, keepdim=True)
+    return -delta_peak * (2 * np.pi) ** 0.5 / width_mm * q * torch.exp(-q2 / (2 * width_mm**2))
+
+
+def _read_array(path: Path, key: Optional[str]) -> np.ndarray:
+    suffix = path.suffix.lower()
+    if suffix == ".npy":
+        return np.load(path)
+    if suffix in (".npz", ".mat", ".h5", ".hdf5"):
+        if suffix == ".npz":
+            store = dict(np.load(path))
+        elif suffix == ".mat":
+            try:
+                import scipy.io
+
+                store = {k: v for k, v in scipy.io.loadmat(path).items() if not k.startswith("__")}
+            except NotImplementedError:  # MATLAB v7.3 files are HDF5
+                store = None
+        if suffix in (".h5", ".hdf5") or (suffix == ".mat" and store is None):
+            import h5py
+
+            with h5py.File(path, "r") as f:
+                store = {k: np.asarray(f[k]) for k in f.keys() if isinstance(f[k], h5py.Dataset)}
+                if suffix == ".mat":  # MATLAB stores arrays column-major
+                    store = {k: v.T for k, v in store.items()}
+        if key is None:
+            if len(store) != 1:
+                raise ValueError(f"{path} holds {sorted(store)}; set phantom.key to the volume's name")
+            key = next(iter(store))
+        if key not in store:
+            raise KeyError(f"{path} has no array '{key}'; it holds {sorted(store)}")
+        return np.asarray(store[key])
+    raise ValueError(f"cannot read volume file {path}: use .npy, .npz, .mat, .h5 or .hdf5")
+
+
+@PHANTOMS.register("file")
+def volume_file(path: str, voxel_mm: float, T0: float, n0: float, quantity: str = "temperature",
+                key: Optional[str] = None) -> Phantom:
+    """A volume (nx, ny, nz) of temperature [K] or refractive index from ``.npy/.npz/.mat/.h5`` (e.g. a DNS
+    snapshot), with its voxel size [mm] and ambient state; the box is centred on the volume."""
+    p = Path(path).expanduser()
+    if not p.is_file():
+        raise FileNotFoundError(f"volume file {p} does not exist")
+    if quantity not in ("temperature", "n"):
+        raise ValueError(f"phantom.quantity must be 'temperature' or 'n', got '{quantity}'")
+    vol = _read_array(p, key).astype(np.float64)
+    if vol.ndim != 3:
+        raise ValueError(f"{p}: the volume must have rank 3 (nx, ny, nz), got shape {vol.shape}")
+    if not np.all(np.isfinite(vol)):
+        raise ValueError(f"{p}: the volume contains {int(np.sum(~np.isfinite(vol)))} NaN or infinite values")
+    if quantity == "n":
+        if vol.min() <= 1.0:
+            raise ValueError(f"{p}: refractive index must exceed 1 everywhere, found {vol.min()}")
+        vol = temperature_from_n(vol, T0, n0)
+    return Phantom(vol, ProbeBox(tuple(vol.shape), float(voxel_mm)), float(T0), float(n0), p.stem)

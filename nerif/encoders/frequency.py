@@ -1,0 +1,27 @@
+import math
+
+import torch
+from torch import nn
+
+from nerif.encoders import ENCODERS
+
+
+@ENCODERS.register("frequency")
+class Frequency(nn.Module):
+    """NeRF positional encoding: ``[x, sin(2^k pi x), cos(2^k pi x)]`` for k < n_octaves.
+
+    (N, 3) -> (N, 3 + 6 n_octaves); 39 features with the paper's 6 octaves.
+    """
+
+    def __init__(self, n_octaves: int = 6, include_input: bool = True):
+        super().__init__()
+        if n_octaves < 1:
+            raise ValueError(f"frequency encoding needs at least one octave, got {n_octaves}")
+        self.include_input = include_input
+        self.register_buffer("freqs", (2.0 ** torch.arange(n_octaves)) * math.pi, persistent=False)
+        self.out_dim = 3 * (2 * n_octaves + int(include_input))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        xf = (x[..., None, :] * self.freqs[:, None]).flatten(-2)  # (N, 3 n_octaves)
+        parts = [x] if self.include_input else []
+        return torch.cat(parts + [torch.sin(xf), torch.cos(xf)], -1)

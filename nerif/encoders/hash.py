@@ -1,0 +1,111 @@
+import math
+
+import torch
+from torch import nn
+
+from nerif.encoders import ENCODERS
+
+# Spatial-hash primes of Teschner et al. / instant-ngp.
+_PRIMES = (1, 2654435761, 805459861)
+
+
+class _Gather(torch.autograd.Function):
+    """``table[index]`` with an ``index_add_`` backward (faster on CPU than embedding's), itself differentiable
+    so that a loss on autograd gradients of the encoding can train the table (double backward)."""
+
+    @staticmethod
+    def forward(ctx, table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(index)
+        ctx.n_rows = table.shape[0]
+        return table.index_select(0, index)
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor):
+        (index,) = ctx.saved_tensors
+        return _Scatter.apply(grad, index, ctx.n_rows), None
+
+
+class _Scatter(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, values: torch.Tensor, index: torch.Tensor, n_rows: int) -> torch.Tensor:
+        ctx.save_for_backward(index)
+        return values.new_zeros(n_rows, values.shape[1]).index_add_(0, index, values)
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor):
+        (index,) = ctx.saved_tensors
+        return _Gather.apply(grad, index), None, None
+
+
+@ENCODERS.register("hash")
+class HashGrid(nn.Module):
+    """Multiresolution hash encoding (instant-ngp), all levels evaluated at once.
+
+    Level l has ``r_l = floor(base * g^l)`` cells per axis over the unit cube (g geometric from
+    ``base_resolution`` to ``max_resolution``). Its grid points index a table of its own directly while they
+    fit in ``2^log2_table_size`` entries (power-of-two strides, so the index is the XOR of disjoint bit
+    fields), and through the spatial hash ``x ^ y * 2654435761 ^ z * 805459861`` otherwise; both are
+    ``(x m0 ^ y m1 ^ z m2) mod size_l`` with per-level multipliers, exact in int32 because the primes are
+    reduced modulo the power-of-two table size. Corners are blended with smoothstep weights
+    ``w = t^2 (3 - 2 t)`` (C1, so the encoding has second derivatives and an autograd deflection loss
+    trains it); ``interpolation='linear'`` gives trilinear weights.
+
+    (N, 3) in [-1, 1]^3 -> (N, n_levels * n_features).
+    """
+
+    def __init__(
+        self,
+        n_levels: int = 16,
+        n_features: int = 2,
+        log2_table_size: int = 19,
+        base_resolution: int = 16,
+        max_resolution: int = 512,
+        init_scale: float = 1e-4,
+        interpolation: str = "smoothstep",
+    ):
+        super().__init__()
+        if interpolation not in ("smoothstep", "linear"):
+            raise ValueError(f"hash interpolation must be 'smoothstep' or 'linear', got '{interpolation}'")
+        if not 1 <= base_resolution <= max_resolution:
+            raise ValueError(f"hash resolutions need 1 <= base ({base_resolution}) <= max ({max_resolution})")
+        if not 4 <= log2_table_size <= 24:
+            raise ValueError(f"log2_table_size must be within 4..24, got {log2_table_size}")
+        self.interpolation = interpolation
+        self.n_levels, self.n_features = n_levels, n_features
+        self.out_dim = n_levels * n_features
+        growth = math.exp((math.log(max_resolution) - math.log(base_resolution)) / max(n_levels - 1, 1))
+        res = [int(math.floor(base_resolution * growth**l + 1e-6)) for l in range(n_levels)]
+        table = 2**log2_table_size
+        sizes, mults = [], []
+        for r in res:
+            stride = 1 << math.ceil(math.log2(r + 1))
+            if stride**3 <= table:  # dense: x + y S + z S^2 = x ^ (y S) ^ (z S^2)
+                sizes.append(stride**3)
+                mults.append((1, stride, stride * stride))
+            else:
+                sizes.append(table)
+                mults.append(tuple(p % table for p in _PRIMES))
+        self.resolutions = res
+        self.register_buffer("resolution", torch.tensor(res, dtype=torch.float32), persistent=False)
+        self.register_buffer("mask", torch.tensor(sizes, dtype=torch.int32) - 1, persistent=False)
+        self.register_buffer("offset", torch.tensor([0] + sizes[:-1]).cumsum(0).int(), persistent=False)
+        self.register_buffer("mult", torch.tensor(mults, dtype=torch.int32), persistent=False)  # (L, 3)
+        self.table = nn.Parameter(torch.empty(sum(sizes), n_features).uniform_(-init_scale, init_scale))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        n, L = x.shape[0], self.n_levels
+        u = ((x + 1) * 0.5).clamp(0.0, 1.0)
+        pos = u[:, None, :] * self.resolution[None, :, None]  # (N, L, 3)
+        cell = torch.minimum(pos.detach().floor(), (self.resolution - 1)[None, :, None])
+        t = pos - cell  # differentiable in x
+        if self.interpolation == "smoothstep":
+            t = t * t * (3.0 - 2.0 * t)
+        c = cell.int()
+        # per axis and corner bit: index term (N, L, 3, 2) and weight (N, L, 3, 2)
+        term = torch.stack([c, c + 1], -1) * self.mult[None, :, :, None]
+        w = torch.stack([1 - t, t], -1)
+        index = term[:, :, 0, :, None, None] ^ term[:, :, 1, None, :, None] ^ term[:, :, 2, None, None, :]
+        index = (index.reshape(n, L, 8) & self.mask[None, :, None]) + self.offset[None, :, None]
+        weight = (w[:, :, 0, :, None, None] * w[:, :, 1, None, :, None] * w[:, :, 2, None, None, :]).reshape(n * L, 1, 8)
+        feats = _Gather.apply(self.table, index.reshape(-1).long()).reshape(n * L, 8, self.n_features)
+        return torch.bmm(weight, feats).reshape(n, L * self.n_features)  # corner blend: bmm beats mul + sum

@@ -1,0 +1,14 @@
+import torch
+from torch import nn
+
+from nerif.encoders import ENCODERS
+
+
+@ENCODERS.register("none")
+class Identity(nn.Module):
+    """No encoding: the MLP sees the coordinates themselves. (N, 3) -> (N, 3)."""
+
+    out_dim = 3
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x

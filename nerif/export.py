@@ -1,0 +1,72 @@
+"""Writing results: atomic file writes, volumes (.npz and VTK .vti for ParaView), JSON metrics."""
+from __future__ import annotations
+
+import base64
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+
+def atomic_write(path: Path, write: Callable[[str], None]) -> Path:
+    """Call ``write(tmp_path)`` then rename onto ``path``: a crash never leaves a half-written file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return path
+
+
+def atomic_save_torch(obj, path: Path) -> Path:
+    return atomic_write(path, lambda tmp: torch.save(obj, tmp))
+
+
+def write_json(obj: dict, path: Path) -> Path:
+    def write(tmp):
+        with open(tmp, "w") as f:
+            json.dump(obj, f, indent=2, sort_keys=True)
+            f.write("\n")
+
+    return atomic_write(path, write)
+
+
+def write_npz(path: Path, **arrays) -> Path:
+    def write(tmp):
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, **arrays)
+
+    return atomic_write(path, write)
+
+
+def write_vti(path: Path, voxel_mm: float, origin_mm, **volumes: np.ndarray) -> Path:
+    """VTK XML ImageData (ParaView): point data on the voxel centres, x fastest; lengths in mm."""
+    shape = next(iter(volumes.values())).shape
+    arrays = []
+    for name, vol in volumes.items():
+        raw = np.asarray(vol, dtype="<f4").ravel(order="F").tobytes()
+        payload = base64.b64encode(np.uint32(len(raw)).tobytes() + raw).decode()
+        arrays.append(f'<DataArray type="Float32" Name="{name}" format="binary">{payload}</DataArray>')
+    extent = " ".join(f"0 {n - 1}" for n in shape)
+    text = (
+        '<?xml version="1.0"?>\n<VTKFile type="ImageData" version="0.1" byte_order="LittleEndian" header_type="UInt32">\n'
+        f'<ImageData WholeExtent="{extent}" Origin="{" ".join(map(str, origin_mm))}" '
+        f'Spacing="{voxel_mm} {voxel_mm} {voxel_mm}">\n<Piece Extent="{extent}">\n'
+        f'<PointData Scalars="{next(iter(volumes))}">\n' + "\n".join(arrays) + "\n</PointData>\n</Piece>\n"
+        "</ImageData>\n</VTKFile>\n"
+    )
+
+    def write(tmp):
+        with open(tmp, "w") as f:
+            f.write(text)
+
+    return atomic_write(path, write)

@@ -1,0 +1,69 @@
+"""The neural refractive-index field: encoder + tiny MLP with a bounded output, optionally gated by a 3-D mask."""
+from __future__ import annotations
+
+import math
+from typing import Callable, Optional
+
+import torch
+from torch import nn
+
+from nerif.encoders import ENCODERS
+from nerif.geometry import ProbeBox
+
+
+class NeuralField(nn.Module):
+    """sigma(p) = gate(p) * (k tanh(MLP(enc(p))) + c), confined to the prior interval [a, b].
+
+    ``k = (b - a) / 2``, ``c = (a + b) / 2``; the last layer starts with zero weights and bias
+    ``atanh(-c / k)`` so the initial field is exactly ambient (sigma = 0) for every encoder.
+    Hidden layers: Kaiming-uniform weights (LeakyReLU slope 0.01), zero biases.
+
+    Args:
+        encoder: an encoder module (``out_dim`` features).
+        box: probe box; positions are world coordinates [mm], normalised by ``box.normalize``.
+        hidden: widths of the hidden layers.
+        prior: (a, b) with a < 0 < b.
+        gate: optional callable (N, 3) [mm] -> (N,) in [0, 1], the 3-D mask.
+    """
+
+    def __init__(self, encoder: nn.Module, box: ProbeBox, hidden=(64, 64), prior=(-1.05, 0.05),
+                 gate: Optional[Callable[[torch.Tensor], torch.Tensor]] = None):
+        super().__init__()
+        a, b = float(prior[0]), float(prior[1])
+        if not a < 0.0 < b:
+            raise ValueError(f"the prior interval [a, b] = [{a}, {b}] must contain the ambient value 0 strictly inside")
+        self.encoder, self.box, self.gate = encoder, box, gate
+        self.k, self.c = (b - a) / 2, (a + b) / 2
+        layers, width = [], encoder.out_dim
+        for h in hidden:
+            lin = nn.Linear(width, h)
+            nn.init.kaiming_uniform_(lin.weight, a=0.01, nonlinearity="leaky_relu")
+            nn.init.zeros_(lin.bias)
+            layers += [lin, nn.LeakyReLU(0.01)]
+            width = h
+        last = nn.Linear(width, 1)
+        nn.init.zeros_(last.weight)
+        nn.init.constant_(last.bias, math.atanh(-self.c / self.k))
+        self.mlp = nn.Sequential(*layers, last)
+
+    def forward(self, p: torch.Tensor) -> torch.Tensor:
+        """(N, 3) world points [mm] -> (N,) sigma."""
+        x = self.box.normalize(p)
+        sigma = self.k * torch.tanh(self.mlp(self.encoder(x))[:, 0]) + self.c
+        if self.gate is not None:
+            sigma = sigma * self.gate(p)
+        return sigma
+
+    @torch.no_grad()
+    def on_grid(self, box: ProbeBox, chunk: int = 1 << 18) -> torch.Tensor:
+        """sigma at the voxel centres of ``box``, (nx, ny, nz)."""
+        dev = next(self.parameters()).device
+        pts = torch.as_tensor(box.centres().reshape(-1, 3), dtype=torch.float32, device=dev)
+        out = torch.cat([self(pts[i:i + chunk]) for i in range(0, len(pts), chunk)])
+        return out.reshape(box.shape)
+
+
+def build_field(cfg, box: ProbeBox, gate=None) -> NeuralField:
+    """Field from the ``encoder`` and ``field`` config groups."""
+    return NeuralField(ENCODERS.build(cfg.encoder), box, hidden=tuple(cfg.field.hidden),
+                       prior=tuple(cfg.field.prior), gate=gate)

@@ -1,0 +1,110 @@
+"""Pinhole cameras of a BOS rig focused on the background plane, and their rays.
+
+Camera frame as in OpenCV: x right, y down (image rows), z forward. Pixel (i, j) = (column, row);
+its centre is at (i + 0.5, j + 0.5).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import torch
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera.
+
+    Attributes:
+        position: camera centre (3,) [mm], world frame.
+        rotation: camera-to-world rotation (3, 3); columns are the right, down and forward axes.
+        image_distance_mm: lens-to-sensor distance, the pinhole focal length [mm].
+        pitch_mm: pixel pitch [mm].
+        width, height: sensor size [px].
+        f_number: lens f-number.
+        background_mm: distance from the camera to the background plane along its axis [mm].
+        focal_mm: lens focal length [mm].
+        name: label used in messages.
+    """
+
+    position: np.ndarray
+    rotation: np.ndarray
+    image_distance_mm: float
+    pitch_mm: float
+    width: int
+    height: int
+    f_number: float
+    background_mm: float
+    focal_mm: float
+    name: str = "camera"
+
+    @property
+    def principal_point(self) -> tuple[float, float]:
+        return self.width / 2.0, self.height / 2.0
+
+    def binned(self, factor: int) -> "Camera":
+        """The same optics read out with ``factor x factor`` pixel binning."""
+        if factor < 1 or self.width % factor or self.height % factor:
+            raise ValueError(f"binning {factor} must divide the sensor size {self.width} x {self.height} px")
+        return replace(self, pitch_mm=self.pitch_mm * factor, width=self.width // factor, height=self.height // factor)
+
+    def pixel_directions(self, dtype=torch.float64) -> torch.Tensor:
+        """Unit ray directions through every pixel centre, (height * width, 3), row-major (row j, column i)."""
+        j, i = torch.meshgrid(torch.arange(self.height, dtype=dtype), torch.arange(self.width, dtype=dtype), indexing="ij")
+        cx, cy = self.principal_point
+        k = self.pitch_mm / self.image_distance_mm
+        d_cam = torch.stack([(i + 0.5 - cx) * k, (j + 0.5 - cy) * k, torch.ones_like(i)], -1).reshape(-1, 3)
+        d = d_cam @ torch.as_tensor(self.rotation, dtype=dtype).T
+        return d / d.norm(dim=-1, keepdim=True)
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """World points (..., 3) [mm] -> pixel coordinates (..., 2) as (column, row), continuous."""
+        pc = (np.asarray(points) - self.position) @ self.rotation
+        cx, cy = self.principal_point
+        k = self.image_distance_mm / self.pitch_mm
+        return np.stack([pc[..., 0] / pc[..., 2] * k + cx, pc[..., 1] / pc[..., 2] * k + cy], -1)
+
+
+def look_at_origin(position: np.ndarray) -> np.ndarray:
+    """Camera-to-world rotation of a camera at ``position`` looking at the origin, image rows along -y."""
+    forward = -np.asarray(position, dtype=np.float64)
+    forward /= np.linalg.norm(forward)
+    down = np.array([0.0, -1.0, 0.0])
+    right = np.cross(down, forward)
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    return np.stack([right, down, forward], axis=1)
+
+
+def arc_rig(
+    n_cameras: int = 12,
+    span_deg: float = 165.0,
+    distance_mm: float = 800.0,
+    focal_mm: float = 105.0,
+    width_px: int = 720,
+    height_px: int = 1280,
+    pitch_um: float = 20.0,
+    background_behind_mm: float = 800.0,
+    f_number: float = 32.0,
+    binning: int = 1,
+) -> list[Camera]:
+    """Cameras evenly over ``span_deg`` on an arc in the x-z plane, all looking at the origin and focused
+    on a background plane ``background_behind_mm`` behind the centre (paper defaults).
+
+    Camera k sits at angle ``theta_k = k * span / (n - 1)`` from +z towards +x: position
+    ``distance * (sin theta, 0, cos theta)``.
+    """
+    if n_cameras < 1:
+        raise ValueError(f"a rig needs at least one camera, got {n_cameras}")
+    background_mm = distance_mm + background_behind_mm
+    if not focal_mm < background_mm:
+        raise ValueError(f"a {focal_mm} mm lens cannot focus on a background {background_mm} mm away")
+    image_distance = 1.0 / (1.0 / focal_mm - 1.0 / background_mm)
+    angles = np.linspace(0.0, np.deg2rad(span_deg), n_cameras) if n_cameras > 1 else np.zeros(1)
+    cams = []
+    for k, th in enumerate(angles):
+        pos = distance_mm * np.array([np.sin(th), 0.0, np.cos(th)])
+        cam = Camera(pos, look_at_origin(pos), image_distance, pitch_um * 1e-3, width_px, height_px,
+                     f_number, background_mm, focal_mm, name=f"camera {k} ({np.rad2deg(th):.1f} deg)")
+        cams.append(cam.binned(binning) if binning > 1 else cam)
+    return cams

@@ -1,0 +1,65 @@
+"""Losses: deflection misfit, and the ambient boundary condition that fixes the field's constant."""
+from __future__ import annotations
+
+from typing import Mapping, Optional, Sequence
+
+import torch
+
+from nerif.geometry import ProbeBox
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def deflection_mse(eps: Mapping[str, torch.Tensor], eps_obs: torch.Tensor, weights: Mapping[str, float]) -> torch.Tensor:
+    """``sum_op lambda_op * mean over rays |eps_op - eps_obs|^2`` over the operators with a positive weight.
+
+    Args:
+        eps: operator name -> (R, 3) rendered deflection (normalised units).
+        eps_obs: (R, 3) observed deflection in the same units.
+        weights: operator name -> lambda (e.g. lambda_a for ``auto``, lambda_d for ``discrete``).
+    """
+    terms = [w * ((eps[name] - eps_obs) ** 2).sum(-1).mean() for name, w in weights.items() if w > 0]
+    if not terms:
+        raise ValueError("every gradient-loss weight is zero: nothing to train on (set grad.weights)")
+    return torch.stack(terms).sum()
+
+
+class AmbientBoundary:
+    """``weight * mean |sigma|`` at random points on the box faces that lie in ambient gas.
+
+    Deflections see only gradients: a constant added to sigma inside the box changes no ray, so nothing in
+    the data fixes the ambient level. BOS tomography closes the problem with a Dirichlet condition, n = n0
+    on the boundary; this is its soft form. The L1 norm lets a few points where a flame does touch a face
+    stay hot instead of biasing the level.
+
+    Args:
+        box: the probe box.
+        faces: axes whose two faces are ambient, e.g. ``("x", "z")``, the lateral faces of a flame
+            burning along y. Empty: no condition.
+        weight: loss weight (normalised units, beside the deflection MSE).
+        points: face points per iteration.
+    """
+
+    def __init__(self, box: ProbeBox, faces: Sequence[str] = ("x", "z"), weight: float = 0.05, points: int = 256):
+        unknown = [f for f in faces if f not in _AXES]
+        if unknown:
+            raise ValueError(f"ambient faces must be among x, y, z; got {unknown}")
+        self.box, self.axes, self.weight, self.points = box, [_AXES[f] for f in faces], float(weight), int(points)
+
+    @property
+    def active(self) -> bool:
+        return bool(self.axes) and self.weight > 0 and self.points > 0
+
+    def sample(self, generator: Optional[torch.Generator], device) -> torch.Tensor:
+        """(points, 3) uniform points on the ambient faces [mm]."""
+        half = torch.as_tensor(self.box.half_mm, dtype=torch.float32, device=device)
+        p = (torch.rand(self.points, 3, generator=generator, device=device) * 2 - 1) * half
+        axis = torch.as_tensor(self.axes, device=device)[
+            torch.randint(len(self.axes), (self.points,), generator=generator, device=device)]
+        side = torch.randint(2, (self.points,), generator=generator, device=device) * 2 - 1
+        p[torch.arange(self.points, device=device), axis] = side * half[axis]
+        return p
+
+    def __call__(self, field, generator: Optional[torch.Generator] = None) -> torch.Tensor:
+        device = next(field.parameters()).device
+        return self.weight * field(self.sample(generator, device)).abs().mean()

@@ -1,0 +1,69 @@
+"""Figures people look at: temperature slices (truth, reconstruction, error) and curves."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from nerif.export import atomic_write  # noqa: E402
+from nerif.geometry import ProbeBox  # noqa: E402
+
+
+def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = None, title: str = ""):
+    """Central vertical slice (x-y at z = 0) and horizontal slice (x-z through the hottest layer) of the
+    reconstruction, with the truth and the error where known. Returns a matplotlib figure."""
+    ref = T_true if T_true is not None else T
+    iz = box.shape[2] // 2
+    iy = int(np.unravel_index(np.argmax(ref), ref.shape)[1])
+    ax_x, ax_y, ax_z = box.axes()
+    h = box.voxel_mm / 2
+    ext_xy = [ax_x[0] - h, ax_x[-1] + h, ax_y[0] - h, ax_y[-1] + h]
+    ext_xz = [ax_x[0] - h, ax_x[-1] + h, ax_z[0] - h, ax_z[-1] + h]
+    cols = [("reconstruction", T)] + ([("truth", T_true), ("error", T - T_true)] if T_true is not None else [])
+    vmin, vmax = float(min(T.min(), ref.min())), float(max(T.max(), ref.max()))
+    fig, axes = plt.subplots(2, len(cols), figsize=(3.6 * len(cols), 7.2), squeeze=False)
+    for j, (name, vol) in enumerate(cols):
+        err = name == "error"
+        lim = float(np.abs(vol).max()) or 1.0
+        kw = dict(cmap="RdBu_r", vmin=-lim, vmax=lim) if err else dict(cmap="inferno", vmin=vmin, vmax=vmax)
+        for i, (img, ext, lab) in enumerate([(vol[:, :, iz].T, ext_xy, ("x [mm]", "y [mm]")),
+                                              (vol[:, iy, :].T, ext_xz, ("x [mm]", "z [mm]"))]):
+            ax = axes[i, j]
+            im = ax.imshow(img, origin="lower", extent=ext, **kw)
+            ax.set_xlabel(lab[0])
+            ax.set_ylabel(lab[1])
+            where = f"z = {ax_z[iz]:.1f} mm" if i == 0 else f"y = {ax_y[iy]:.1f} mm"
+            ax.set_title(f"{name} [K], {where}", fontsize=9)
+            fig.colorbar(im, ax=ax, fraction=0.046)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def save_figure(fig, path: Path) -> Path:
+    path = atomic_write(Path(path), lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    plt.close(fig)
+    return path
+
+
+def curves_figure(history: list[dict], losses: list[tuple[int, float]]):
+    """Training loss against iteration and the evaluation errors against wall time."""
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8))
+    if losses:
+        it, lv = zip(*losses)
+        a.semilogy(it, lv, lw=0.8)
+    a.set_xlabel("iteration")
+    a.set_ylabel("loss (normalised deflection MSE)")
+    key = "temperature_rmse_K" if history and "temperature_rmse_K" in history[0] else "deflection_rmse"
+    if history:
+        b.plot([h["wall_time_s"] for h in history], [h[key] for h in history], "o-", ms=3)
+    b.set_xlabel("training wall time [s]")
+    b.set_ylabel(key)
+    fig.tight_layout()
+    return fig

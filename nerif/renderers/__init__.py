@@ -1,0 +1,8 @@
+"""Ray sampling, gradient operators and deflection rendering (neural and voxel fields)."""
+from nerif.renderers.deflection import integrate, render_deflections
+from nerif.renderers.gradients import GRADIENTS
+from nerif.renderers.samplers import SAMPLERS, Samples
+from nerif.renderers.voxel import gradient_volume, voxel_deflection
+
+__all__ = ["GRADIENTS", "SAMPLERS", "Samples", "integrate", "render_deflections", "gradient_volume",
+           "voxel_deflection"]

@@ -1,0 +1,38 @@
+"""Deflection rendering: ``eps = sum_i grad(sigma)(p_i) dt_i`` along each ray (paraxial, straight rays)."""
+from __future__ import annotations
+
+from typing import Mapping
+
+import torch
+
+from nerif.renderers.gradients import GRADIENTS
+from nerif.renderers.samplers import Samples
+
+
+def integrate(values: torch.Tensor, samples: Samples) -> torch.Tensor:
+    """Segment sum of per-sample values weighted by dt: (S, C) -> (n_rays, C)."""
+    out = values.new_zeros(samples.n_rays, values.shape[-1])
+    return out.index_add(0, samples.ray_index, values * samples.dt[:, None].to(values.dtype))
+
+
+def render_deflections(field, samples: Samples, operators: Mapping[str, bool], step_mm: float) -> dict:
+    """Deflections of the field along packed samples for each named gradient operator.
+
+    Args:
+        field: callable (S, 3) [mm] -> (S,) sigma.
+        operators: operator name -> whether a loss is trained on it (builds the graph it needs:
+            second-order for ``auto``); an untrained operator is evaluated without any parameter graph.
+        step_mm: central-difference step for ``discrete``.
+    Returns:
+        name -> (n_rays, 3) deflection of sigma (dimensionless; multiply by delta_thre for radians).
+    """
+    out = {}
+    pos = samples.positions
+    for name, trained in operators.items():
+        op = GRADIENTS.get(name)
+        if trained:
+            g = op(field, pos, create_graph=True, step_mm=step_mm)
+        else:
+            g = op(field, pos, create_graph=False, step_mm=step_mm).detach()
+        out[name] = integrate(g, samples)
+    return out

@@ -1,0 +1,224 @@
+"""Training a neural field on a scene's deflections: the optimisation state and its loop."""
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+import torch
+
+from nerif.data import Scene
+from nerif.export import atomic_save_torch
+from nerif.field import NeuralField
+from nerif.losses import AmbientBoundary, deflection_mse
+from nerif.metrics import deflection_rmse, flame_region, rmse
+from nerif.renderers import render_deflections
+from nerif.renderers.samplers import UniformSampler
+
+log = logging.getLogger(__name__)
+
+
+class DivergenceError(RuntimeError):
+    """The loss became NaN or infinite."""
+
+
+class Trainer:
+    """Adam + cosine annealing on random rays of one view per iteration (views cycled).
+
+    Args:
+        field: the neural field. scene: rays and observations (on the training device).
+        sampler: rays -> packed samples. weights: gradient operator -> loss weight (lambda_a, lambda_d).
+        boundary: ambient boundary condition (None: none).
+        iterations, rays_per_view, lr, betas, eps, lr_min: optimisation settings.
+        eval_rays_per_view: fixed rays per view for the deflection metrics.
+        seed: RNG seed (ray draws and sample offsets).
+    """
+
+    def __init__(self, field: NeuralField, scene: Scene, sampler, weights: dict, *, iterations: int,
+                 boundary: Optional[AmbientBoundary] = None,
+                 rays_per_view: int, lr: float = 2e-2, betas=(0.9, 0.99), eps: float = 1e-8, lr_min: float = 1e-6,
+                 eval_rays_per_view: int = 512, flame_threshold_K: float = 1.0, seed: int = 0):
+        if rays_per_view < 1:
+            raise ValueError(f"rays per view must be at least 1, got {rays_per_view}")
+        if iterations < 1:
+            raise ValueError(f"iterations must be at least 1, got {iterations}")
+        self.field, self.scene, self.sampler = field, scene, sampler
+        self.weights = {k: float(v) for k, v in weights.items()}
+        self.boundary = boundary if boundary is not None and boundary.active else None
+        self.iterations, self.rays_per_view = int(iterations), int(rays_per_view)
+        self.device = scene.dirs.device
+        params = list(field.parameters())
+        fused = self.device.type == "cuda"
+        self.optimizer = torch.optim.Adam(params, lr=lr, betas=tuple(betas), eps=eps, fused=fused)
+        self.scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(self.optimizer, T_max=self.iterations, eta_min=lr_min)
+        self.generator = torch.Generator(self.device).manual_seed(seed)
+        # central-difference step: b_min / (2 K), K the most samples per ray
+        self.step_mm = scene.box.shortest_side_mm / (2 * sampler.samples_per_ray)
+        self.scale = scene.ambient.delta_thre  # rad per unit of sigma deflection
+        self.iteration = 0
+        self.history: list[dict] = []
+        self.train_seconds = 0.0
+        self.samples_seen = 0
+        self.step_times: list[float] = []
+        self.flame_threshold_K = flame_threshold_K
+        self._eval_index = self._eval_rays(eval_rays_per_view, seed)
+        self._eval_sampler = UniformSampler(sampler.samples_per_ray, jitter=False)
+
+    # --- batches ---
+    def _eval_rays(self, per_view: int, seed: int) -> torch.Tensor:
+        g = torch.Generator().manual_seed(seed + 1)
+        counts, starts = self.scene.view_counts().cpu(), self.scene.view_start.cpu()
+        idx = [s + torch.randperm(int(c), generator=g)[:per_view] for s, c in zip(starts[:-1], counts)]
+        return torch.cat(idx).to(self.device)
+
+    def rays(self, index: torch.Tensor):
+        """Ray origins, directions and observed deflections (sigma units) of scene rays ``index``."""
+        views = torch.searchsorted(self.scene.view_start, index, right=True) - 1
+        return self.scene.origins[views], self.scene.dirs[index], self.scene.eps[index] / self.scale
+
+    def draw(self, view: int) -> torch.Tensor:
+        start = self.scene.view_start[view]
+        count = int(self.scene.view_start[view + 1] - start)
+        return start + torch.randint(count, (self.rays_per_view,), generator=self.generator, device=self.device)
+
+    # --- optimisation ---
+    def step(self) -> dict:
+        """One iteration on the next view; returns the loss terms (floats)."""
+        t0 = time.perf_counter()
+        view = self.iteration % self.scene.n_views
+        o, d, eps_obs = self.rays(self.draw(view))
+        samples = self.sampler(self.scene.box, o, d, self.generator)
+        trained = {name: True for name, w in self.weights.items() if w > 0}
+        eps = render_deflections(self.field, samples, trained, self.step_mm)
+        loss = deflection_mse(eps, eps_obs, self.weights)
+        boundary = self.boundary(self.field, self.generator) if self.boundary is not None else None
+        if boundary is not None:
+            loss = loss + boundary
+        if not torch.isfinite(loss):
+            raise DivergenceError(f"the loss became {loss.item()} at iteration {self.iteration}: the run diverged "
+                                  "(try a lower train.lr); the last good checkpoint is kept")
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        self.optimizer.step()
+        self.scheduler.step()
+        self.iteration += 1
+        if self.device.type == "cuda":
+            torch.cuda.synchronize()
+        dt = time.perf_counter() - t0
+        self.train_seconds += dt
+        self.step_times.append(dt)
+        self.samples_seen += len(samples.positions)
+        out = {"loss": loss.item(), "samples_per_ray": len(samples.positions) / max(samples.n_rays, 1)}
+        out.update({f"loss_{n}": ((eps[n] - eps_obs) ** 2).sum(-1).mean().item() for n in eps})
+        if boundary is not None:
+            out["loss_boundary"] = boundary.item()
+        return out
+
+    # --- evaluation ---
+    def reconstruction(self) -> np.ndarray:
+        """sigma on the scene's probe grid, (nx, ny, nz)."""
+        was = self.field.training
+        self.field.eval()
+        sigma = self.field.on_grid(self.scene.box).cpu().numpy().astype(np.float64)
+        self.field.train(was)
+        return sigma
+
+    def predicted_deflections(self, index: torch.Tensor, operators=("auto", "discrete")) -> dict:
+        """Deflections [rad] of scene rays ``index`` by each operator, without any parameter graph."""
+        o, d, _ = self.rays(index)
+        out = {n: [] for n in operators}
+        for i in range(0, len(index), 4096):
+            s = self._eval_sampler(self.scene.box, o[i:i + 4096], d[i:i + 4096])
+            eps = render_deflections(self.field, s, {n: False for n in operators}, self.step_mm)
+            for n in operators:
+                out[n].append(eps[n] * self.scale)
+        return {n: torch.cat(v) for n, v in out.items()}
+
+    def evaluate(self) -> dict:
+        """Metrics now: temperature/sigma errors on the grid (when the truth is known), deflection errors."""
+        sigma = self.reconstruction()
+        amb = self.scene.ambient
+        m = {"iteration": self.iteration, "wall_time_s": self.train_seconds}
+        if self.scene.truth_T is not None:
+            T = amb.temperature_from_sigma(sigma)
+            Tt = self.scene.truth_T
+            m["temperature_rmse_K"] = rmse(T, Tt)
+            m["temperature_rmse_flame_K"] = rmse(T, Tt, flame_region(Tt, amb.T0, self.flame_threshold_K))
+            m["sigma_rmse"] = rmse(sigma, amb.sigma_from_temperature(Tt))
+        eps = self.predicted_deflections(self._eval_index)
+        obs = self.scene.eps[self._eval_index]
+        for n, e in eps.items():
+            m[f"deflection_rmse_{n}"] = deflection_rmse(e, obs)
+        trained = [n for n, w in self.weights.items() if w > 0]
+        m["deflection_rmse"] = m[f"deflection_rmse_{'discrete' if 'discrete' in trained else trained[0]}"]
+        self.history.append(m)
+        return m
+
+    # --- checkpoints ---
+    def state_dict(self) -> dict:
+        return {"field": self.field.state_dict(), "optimizer": self.optimizer.state_dict(),
+                "scheduler": self.scheduler.state_dict(), "generator": self.generator.get_state(),
+                "iteration": self.iteration, "history": self.history, "train_seconds": self.train_seconds,
+                "samples_seen": self.samples_seen, "step_times": self.step_times}
+
+    def save(self, path: Path) -> None:
+        atomic_save_torch(self.state_dict(), path)
+
+    def load(self, path: Path) -> None:
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"checkpoint {path} does not exist")
+        st = torch.load(path, map_location=self.device, weights_only=False)
+        try:
+            self.field.load_state_dict(st["field"])
+        except RuntimeError as e:
+            raise ValueError(f"checkpoint {path} was made with another field configuration "
+                             f"(encoder/field settings differ): {str(e).splitlines()[0]}") from None
+        self.optimizer.load_state_dict(st["optimizer"])
+        self.scheduler.load_state_dict(st["scheduler"])
+        self.generator.set_state(st["generator"].cpu() if self.device.type == "cpu" else st["generator"])
+        for k in ("iteration", "history", "train_seconds", "samples_seen", "step_times"):
+            setattr(self, k, st[k])
+
+    # --- loop ---
+    def fit(self, *, eval_every: int, checkpoint_every: int, checkpoint: Optional[Path] = None,
+            on_eval: Optional[Callable[[dict], None]] = None, on_step: Optional[Callable[[int, dict], None]] = None,
+            progress: bool = True) -> dict:
+        """Train to ``iterations``; evaluates every ``eval_every`` and at the end, checkpoints every
+        ``checkpoint_every`` (atomically) and on Ctrl-C. A NaN loss raises :class:`DivergenceError` and leaves
+        the last good checkpoint in place."""
+        from tqdm import tqdm
+
+        bar = tqdm(total=self.iterations, initial=self.iteration, disable=not progress, mininterval=2.0,
+                   desc="nerif", unit="it", dynamic_ncols=True)
+        last = self.history[-1] if self.history else {}
+        try:
+            while self.iteration < self.iterations:
+                terms = self.step()
+                bar.update(1)
+                if on_step is not None:
+                    on_step(self.iteration, terms)
+                done = self.iteration == self.iterations
+                if self.iteration % eval_every == 0 or done:
+                    last = self.evaluate()
+                    if on_eval is not None:
+                        on_eval(last)
+                    if "temperature_rmse_K" in last:
+                        bar.set_postfix(loss=f"{terms['loss']:.3g}", T_rmse=f"{last['temperature_rmse_K']:.1f}K")
+                if checkpoint is not None and (self.iteration % checkpoint_every == 0 or done):
+                    self.save(checkpoint)
+        except KeyboardInterrupt:
+            if checkpoint is not None:
+                self.save(checkpoint)
+                log.warning("interrupted at iteration %d; checkpoint saved to %s", self.iteration, checkpoint)
+            raise
+        finally:
+            bar.close()
+        return last
+
+    def timing(self) -> dict:
+        steps = np.asarray(self.step_times) if self.step_times else np.zeros(1)
+        return {"iterations": self.iteration, "ms_per_iteration": float(np.median(steps) * 1e3),
+                "samples_per_second": self.samples_seen / max(self.train_seconds, 1e-9)}

@@ -1,0 +1,15 @@
+"""A tiny scene that trains in seconds on a CPU."""
+from hydra import compose, initialize_config_dir
+from pathlib import Path
+
+CONF = str(Path(__file__).resolve().parents[1] / "conf")
+TINY = ["device=cpu", "phantom=gaussian_blob", "phantom.shape=[16,16,16]", "phantom.voxel_mm=3.0",
+        "phantom.width_mm=7.0", "rig.n_cameras=6", "rig.binning=40", "sampler.samples_per_ray=16",
+        "train.iterations=20", "train.rays_per_view=64", "train.eval_every=10", "train.eval_rays_per_view=32",
+        "train.checkpoint_every=10", "train.progress=false", "data.cache_dir=null", "data.render_supersample=1",
+        "field.finest_resolution=32", "field.log2_table_size=12"]
+
+
+def tiny_config(*overrides):
+    with initialize_config_dir(config_dir=CONF, version_base=None):
+        return compose("config", overrides=TINY + list(overrides))

@@ -1,0 +1,81 @@
+"""The command line as a user runs it: outputs of a run, the multirun table, clear errors on bad input."""
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.helpers import TINY
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def nerif(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "nerif", *args], cwd=cwd, capture_output=True, text=True, timeout=600)
+
+
+@pytest.mark.slow
+def test_a_run_writes_every_output(tmp_path):
+    out = tmp_path / "run"
+    r = nerif(*TINY, f"hydra.run.dir={out}", cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "nerif: T RMSE" in r.stdout and str(out) in r.stdout
+    m = json.loads((out / "metrics.json").read_text())
+    for key in ("temperature_rmse_K", "temperature_rmse_flame_K", "sigma_rmse", "deflection_rmse", "wall_time_s",
+                "iterations", "ms_per_iteration", "samples_per_second", "samples_per_ray_mean", "device"):
+        assert key in m, key
+    assert m["iterations"] == 20 and m["temperature_rmse_flame_K"] >= m["temperature_rmse_K"] > 0
+    z = np.load(out / "reconstruction.npz")
+    assert z["T"].shape == z["n"].shape == z["delta"].shape == (16, 16, 16)
+    np.testing.assert_allclose(z["delta"], z["n"] / float(z["n0"]) - 1, atol=1e-12)
+    for f in ("reconstruction.vti", "slices.png", "curves.png", "checkpoint.pt", ".hydra/config.yaml"):
+        assert (out / f).is_file(), f
+    events = list((out / "tensorboard").glob("events.out.tfevents.*"))
+    assert events
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(out / "tensorboard"), size_guidance={"images": 0}).Reload()
+    tags = acc.Tags()
+    for tag in ("train/loss", "train/lr", "train/loss_discrete", "eval/temperature_rmse_K",
+                "eval/deflection_rmse_auto", "eval/deflection_rmse_discrete"):
+        assert tag in tags["scalars"], tag
+    assert "slices" in tags["images"]
+    # resume to 30 iterations from the checkpoint
+    r2 = nerif(*TINY, "train.iterations=30", f"train.resume={out / 'checkpoint.pt'}", f"hydra.run.dir={tmp_path / 'more'}",
+               cwd=ROOT)
+    assert r2.returncode == 0, r2.stderr[-2000:]
+    assert json.loads((tmp_path / "more" / "metrics.json").read_text())["iterations"] == 30
+
+
+@pytest.mark.slow
+def test_multirun_writes_the_summary_table(tmp_path):
+    sweep = tmp_path / "sweep"
+    r = nerif("-m", *TINY, "train.iterations=6", "train.eval_every=3", "encoder=none,hash", "grad=discrete,hybrid",
+              f"hydra.sweep.dir={sweep}", cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    rows = list(csv.DictReader((sweep / "summary.csv").open()))
+    assert len(rows) == 4
+    assert {row["config"].split(" ")[-2] + " " + row["config"].split(" ")[-1] for row in rows} == {
+        "encoder=none grad=discrete", "encoder=none grad=hybrid", "encoder=hash grad=discrete",
+        "encoder=hash grad=hybrid"}
+    assert all(float(row["temperature_rmse_K"]) > 0 and float(row["wall_time_s"]) > 0 for row in rows)
+    md = (sweep / "summary.md").read_text()
+    assert md.count("\n") == 6 and "T RMSE [K]" in md
+
+
+@pytest.mark.parametrize("override, message", [
+    ("encoder=fourier", "Available options in 'encoder'"),
+    ("train.rays_per_view=0", "rays per view must be at least 1"),
+    ("sampler.samples_per_ray=1", "samples per ray K must be at least 2"),
+    ("phantom.T_peak=0.5", "below 1 K"),
+    ("loss.ambient_faces=[w]", "ambient faces"),
+])
+def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
+    r = nerif(*TINY, override, f"hydra.run.dir={tmp_path}", cwd=ROOT)
+    assert r.returncode != 0
+    assert message in r.stderr + r.stdout
+    assert "Traceback" not in r.stderr
+    assert not (tmp_path / "checkpoint.pt").exists()

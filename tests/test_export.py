@@ -1,0 +1,41 @@
+import base64
+import json
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from nerif.export import atomic_write, write_json, write_npz, write_vti
+
+
+def test_vti_holds_the_volume_x_fastest(tmp_path):
+    vol = np.random.rand(3, 4, 5).astype(np.float32)
+    write_vti(tmp_path / "v.vti", 0.5, [-0.5, -0.75, -1.0], T=vol)
+    root = ET.parse(tmp_path / "v.vti").getroot()
+    img = root.find("ImageData")
+    assert img.get("WholeExtent") == "0 2 0 3 0 4" and img.get("Spacing") == "0.5 0.5 0.5"
+    raw = base64.b64decode(img.find("Piece/PointData/DataArray").text)
+    n = np.frombuffer(raw[:4], "<u4")[0]
+    data = np.frombuffer(raw[4:4 + n], "<f4").reshape(5, 4, 3)  # z slowest
+    np.testing.assert_array_equal(data.transpose(2, 1, 0), vol)
+
+
+def test_atomic_write_leaves_the_old_file_on_failure(tmp_path):
+    p = tmp_path / "metrics.json"
+    write_json({"a": 1}, p)
+
+    def broken(tmp):
+        with open(tmp, "w") as f:
+            f.write("{half")
+        raise RuntimeError("crash while writing")
+
+    with pytest.raises(RuntimeError):
+        atomic_write(p, broken)
+    assert json.loads(p.read_text()) == {"a": 1}
+    assert [q.name for q in tmp_path.iterdir()] == ["metrics.json"]
+
+
+def test_npz_round_trip(tmp_path):
+    write_npz(tmp_path / "r.npz", T=np.ones((2, 2, 2)), voxel_mm=0.5)
+    z = np.load(tmp_path / "r.npz")
+    assert z["T"].shape == (2, 2, 2) and float(z["voxel_mm"]) == 0.5

@@ -1,0 +1,62 @@
+import numpy as np
+import pytest
+import torch
+
+from nerif.geometry import ProbeBox, arc_rig, sample_volume
+
+
+def test_box_axes_and_normalisation():
+    box = ProbeBox((4, 6, 4), 0.5)
+    np.testing.assert_allclose(box.axes()[1], [-1.25, -0.75, -0.25, 0.25, 0.75, 1.25])
+    p = torch.tensor([[1.0, 1.5, -1.0]])
+    np.testing.assert_allclose(box.normalize(p).numpy(), [[2 / 3, 1.0, -2 / 3]])
+    np.testing.assert_allclose(box.to_grid(p).numpy(), [[1.0, 1.0, -1.0]])
+
+
+def test_sample_volume_reproduces_a_linear_field_and_voxel_values():
+    box = ProbeBox((5, 7, 6), 1.0)
+    c = box.centres()
+    vol = torch.as_tensor(2 * c[..., 0] - c[..., 1] + 0.5 * c[..., 2], dtype=torch.float64)
+    p = torch.rand(100, 3, dtype=torch.float64) * torch.tensor([4.0, 6.0, 5.0]) - torch.tensor([2.0, 3.0, 2.5])
+    expect = 2 * p[:, 0] - p[:, 1] + 0.5 * p[:, 2]
+    torch.testing.assert_close(sample_volume(vol, box, p), expect)
+    torch.testing.assert_close(sample_volume(vol, box, torch.as_tensor(c[1, 2, 3])[None]), vol[1, 2, 3][None])
+
+
+def test_ray_box_intersection_chords():
+    box = ProbeBox((10, 20, 10), 1.0)  # 10 x 20 x 10 mm
+    o = torch.tensor([[0.0, 0.0, 100.0], [0.0, 0.0, 100.0], [50.0, 0.0, 100.0]])
+    d = torch.nn.functional.normalize(torch.tensor([[0.0, 0.0, -1.0], [0.0, 1.0, -20.0], [0.0, 0.0, -1.0]]), dim=-1)
+    t0, t1, hit = box.intersect(o, d)
+    assert hit.tolist() == [True, True, False]
+    assert (t1 - t0)[0].item() == pytest.approx(10.0)
+    assert t0[0].item() == pytest.approx(95.0)
+
+
+def test_arc_rig_matches_the_paper_geometry():
+    cams = arc_rig(binning=1)
+    assert len(cams) == 12
+    # cameras 800 mm from the centre, 15 degrees apart, camera 0 on +z, camera 6 at 90 degrees on +x
+    np.testing.assert_allclose([np.linalg.norm(c.position) for c in cams], 800.0)
+    np.testing.assert_allclose(cams[0].position, [0, 0, 800], atol=1e-9)
+    np.testing.assert_allclose(cams[11].position / 800, [np.sin(np.deg2rad(165)), 0, np.cos(np.deg2rad(165))])
+    # 105 mm lens focused 1600 mm away: image distance 112.37 mm (the paper data's fl = 5618.73 px of 20 um)
+    assert cams[0].image_distance_mm / 0.020 == pytest.approx(5618.73, rel=1e-5)
+    for cam in cams:
+        np.testing.assert_allclose(cam.project(np.zeros(3)), [360.0, 640.0], atol=1e-9)
+        # image rows run down the world y axis
+        assert cam.project(np.array([0.0, 10.0, 0.0]))[1] < 640.0
+
+
+def test_pixel_directions_project_back_to_their_pixels():
+    cam = arc_rig(n_cameras=3, binning=16)[1]
+    d = cam.pixel_directions().numpy()
+    pts = cam.position + 700.0 * d
+    uv = cam.project(pts)
+    j, i = np.divmod(np.arange(cam.width * cam.height), cam.width)
+    np.testing.assert_allclose(uv, np.stack([i + 0.5, j + 0.5], -1), atol=1e-6)
+
+
+def test_binning_must_divide_the_sensor():
+    with pytest.raises(ValueError, match="binning 7"):
+        arc_rig(binning=7)

@@ -1,0 +1,71 @@
+import numpy as np
+import pytest
+import scipy.io
+
+from nerif.data.phantoms import PHANTOMS, gaussian_blob, phantom5, phantom5_temperature
+from nerif.physics import n_from_temperature
+
+
+def test_phantom5_by_hand():
+    # at (0, 50, 0) the central blob's g = exp(-(0 - 0.9)^2); the side blobs are 25 mm away: exp(-14.3)
+    side = np.exp(-((3 * 25**2 / 400 - 0.9) ** 2))
+    assert phantom5_temperature(0.0, 50.0, 0.0) == pytest.approx(296.15 + 1196.85 * np.exp(-0.81) + 2 * 696.85 * side)
+    ph = phantom5(shape=(36, 50, 36), voxel_mm=2.0)
+    assert ph.T.shape == (36, 50, 36) and ph.box.extent_mm.tolist() == [72.0, 100.0, 72.0]
+    # symmetric in x and z, ambient far from the blobs
+    np.testing.assert_allclose(ph.T, ph.T[::-1], rtol=1e-12)
+    np.testing.assert_allclose(ph.T, ph.T[:, :, ::-1], rtol=1e-12)
+    assert ph.T[0, 25, 0] == pytest.approx(296.15, abs=1e-6)
+
+
+def test_gaussian_blob_peak():
+    ph = gaussian_blob(shape=(21, 21, 21), voxel_mm=1.0, T_peak=1500.0)
+    assert ph.T.max() == pytest.approx(1500.0, rel=1e-9)
+    assert ph.delta.min() == pytest.approx(n_from_temperature(1500.0, 296.15, 1.00027) / 1.00027 - 1, rel=1e-9)
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".npz", ".mat", ".h5"])
+def test_volume_files_round_trip(tmp_path, suffix):
+    T = 296.15 + 500 * np.random.rand(6, 8, 5)
+    path = tmp_path / f"flame{suffix}"
+    if suffix == ".npy":
+        np.save(path, T)
+    elif suffix == ".npz":
+        np.savez(path, T=T)
+    elif suffix == ".mat":
+        scipy.io.savemat(path, {"T": T})
+    else:
+        import h5py
+
+        with h5py.File(path, "w") as f:
+            f["T"] = T
+    ph = PHANTOMS.build({"name": "file", "path": str(path), "voxel_mm": 0.5, "T0": 296.15, "n0": 1.00027})
+    np.testing.assert_allclose(ph.T, T)
+    assert ph.box.shape == (6, 8, 5) and ph.box.voxel_mm == 0.5
+
+
+def test_refractive_index_files_become_temperatures(tmp_path):
+    T = np.full((4, 4, 4), 900.0)
+    np.save(tmp_path / "n.npy", n_from_temperature(T, 296.15, 1.00027))
+    ph = PHANTOMS.build({"name": "file", "path": str(tmp_path / "n.npy"), "voxel_mm": 1, "T0": 296.15,
+                         "n0": 1.00027, "quantity": "n"})
+    np.testing.assert_allclose(ph.T, 900.0, rtol=1e-9)
+
+
+@pytest.mark.parametrize("volume, message", [
+    (np.full((4, 4), 300.0), "rank 3"),
+    (np.where(np.arange(64).reshape(4, 4, 4) == 5, np.nan, 300.0), "NaN"),
+    (np.full((4, 4, 4), 0.5), "below 1 K"),
+])
+def test_bad_volume_files_fail_clearly(tmp_path, volume, message):
+    np.save(tmp_path / "v.npy", volume)
+    with pytest.raises(ValueError, match=message):
+        PHANTOMS.build({"name": "file", "path": str(tmp_path / "v.npy"), "voxel_mm": 1, "T0": 296.15, "n0": 1.00027})
+
+
+def test_missing_file_and_ambiguous_archive(tmp_path):
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        PHANTOMS.build({"name": "file", "path": str(tmp_path / "nope.npy"), "voxel_mm": 1, "T0": 296, "n0": 1.0003})
+    np.savez(tmp_path / "two.npz", a=np.ones((2, 2, 2)), b=np.ones((2, 2, 2)))
+    with pytest.raises(ValueError, match="phantom.key"):
+        PHANTOMS.build({"name": "file", "path": str(tmp_path / "two.npz"), "voxel_mm": 1, "T0": 296, "n0": 1.0003})

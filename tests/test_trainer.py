@@ -1,0 +1,98 @@
+import numpy as np
+import pytest
+import torch
+from omegaconf import OmegaConf
+
+from nerif.data import DATASETS
+from nerif.field import build_field
+from nerif.losses import AmbientBoundary
+from nerif.metrics import rmse
+from nerif.renderers import GRADIENTS, SAMPLERS
+from nerif.trainer import DivergenceError, Trainer
+from tests.helpers import tiny_config
+
+
+def make_trainer(*overrides, **kw):
+    cfg = tiny_config(*overrides)
+    scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True))
+    torch.manual_seed(0)
+    field = build_field(cfg, scene.box)
+    tc = cfg.train
+    return Trainer(field, scene, SAMPLERS.build(cfg.sampler), dict(cfg.grad.weights), iterations=tc.iterations,
+                   rays_per_view=tc.rays_per_view, lr=tc.lr, eval_rays_per_view=tc.eval_rays_per_view,
+                   boundary=AmbientBoundary(scene.box), **kw)
+
+
+def test_resuming_a_checkpoint_continues_exactly(tmp_path):
+    straight = make_trainer()
+    for _ in range(12):
+        straight.step()
+    first = make_trainer()
+    for _ in range(6):
+        first.step()
+    first.save(tmp_path / "ck.pt")
+    resumed = make_trainer()
+    resumed.load(tmp_path / "ck.pt")
+    assert resumed.iteration == 6
+    for _ in range(6):
+        resumed.step()
+    for a, b in zip(straight.field.parameters(), resumed.field.parameters()):
+        torch.testing.assert_close(a, b)
+
+
+def test_a_diverging_run_stops_and_keeps_the_last_good_checkpoint(tmp_path):
+    tr = make_trainer()
+    for _ in range(5):
+        tr.step()
+    tr.save(tmp_path / "ck.pt")
+    with torch.no_grad():
+        tr.field.mlp[0].weight.fill_(float("nan"))
+    with pytest.raises(DivergenceError, match="diverged"):
+        tr.fit(eval_every=100, checkpoint_every=1, checkpoint=tmp_path / "ck.pt", progress=False)
+    assert torch.load(tmp_path / "ck.pt", weights_only=False)["iteration"] == 5
+
+
+def test_a_checkpoint_of_another_field_is_refused(tmp_path):
+    tr = make_trainer("encoder=frequency")
+    tr.save(tmp_path / "ck.pt")
+    with pytest.raises(ValueError, match="another field configuration"):
+        make_trainer("encoder=hash").load(tmp_path / "ck.pt")
+
+
+def test_no_second_order_graph_when_only_the_discrete_term_trains(monkeypatch):
+    calls = []
+    auto = GRADIENTS.get("auto")
+
+    def spy(field, p, *, create_graph, step_mm):
+        calls.append(create_graph)
+        return auto(field, p, create_graph=create_graph, step_mm=step_mm)
+
+    monkeypatch.setitem(GRADIENTS._entries, "auto", spy)
+    tr = make_trainer("grad=discrete")
+    tr.step()
+    assert calls == []  # training never touches autograd deflections
+    tr.evaluate()
+    assert calls and not any(calls)  # monitoring computes them without a graph
+    calls.clear()
+    make_trainer("grad=hybrid").step()
+    assert calls == [True]
+
+
+def test_rays_per_view_and_iterations_are_checked():
+    with pytest.raises(ValueError, match="rays per view"):
+        make_trainer("train.rays_per_view=0")
+    with pytest.raises(ValueError, match="samples per ray K must be at least 2"):
+        make_trainer("sampler.samples_per_ray=1")
+
+
+@pytest.mark.slow
+def test_a_small_reconstruction_cuts_the_error_well_under_half_of_the_ambient_field():
+    # a 10 mm blob (peak 1200 K) in a 48 mm box, 6 views with a 2.8 mm pixel footprint, 400 iterations
+    tr = make_trainer("encoder=hash", "phantom.width_mm=10.0", "rig.binning=20", "train.iterations=400",
+                      "train.rays_per_view=128")
+    while tr.iteration < tr.iterations:
+        tr.step()
+    m = tr.evaluate()
+    ambient = rmse(np.full_like(tr.scene.truth_T, tr.scene.ambient.T0), tr.scene.truth_T)
+    assert m["temperature_rmse_K"] < 0.4 * ambient, (m["temperature_rmse_K"], ambient)
+    assert m["deflection_rmse"] < 0.2 * float(tr.scene.eps.norm(dim=-1).pow(2).mean().sqrt())
