@@ -4,8 +4,8 @@
     python benchmarks/ablation.py --set device=cuda +experiment=paper_phantom5 --cells "encoder=hash grad=discrete"
 
 Every cell runs through ``nerif.app.run`` (the same code as ``python -m nerif``) in one process, one after
-the other, so ratios between cells are measured side by side. Writes ``ablation.json`` and ``ablation.md``
-(plus each cell's full run folder) under ``--out``.
+the other, so ratios between cells are measured side by side. Writes ``ablation.json``, ``ablation.md`` and
+``ablation.csv`` (plus each cell's full run folder) under ``--out``.
 """
 from __future__ import annotations
 
@@ -19,23 +19,11 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from nerif.app import run
-from nerif.export import atomic_write, write_json
+from nerif.export import write_json
+from nerif.summary import COLUMNS, write_tables
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 DEFAULT_CELLS = [f"encoder={e} grad={g}" for e in ("none", "frequency", "hash") for g in ("auto", "discrete", "hybrid")]
-COLUMNS = [("temperature_rmse_K", "T RMSE [K]", "{:.1f}"), ("temperature_rmse_flame_K", "T RMSE flame [K]", "{:.1f}"),
-           ("deflection_rmse", "defl. RMSE [rad]", "{:.2e}"), ("wall_time_s", "train time [s]", "{:.1f}"),
-           ("ms_per_iteration", "ms/it", "{:.1f}"), ("samples_per_second", "samples/s", "{:.3g}"),
-           ("iterations", "iterations", "{}")]
-
-
-def markdown(rows: list[dict], header: str) -> str:
-    lines = [header, "", "| cell | " + " | ".join(h for _, h, _ in COLUMNS) + " |", "|---" * (len(COLUMNS) + 1) + "|"]
-    for r in rows:
-        lines.append(f"| {r['cell']} | " + " | ".join(f.format(r[k]) if k in r else "" for k, _, f in COLUMNS) + " |")
-    return "\n".join(lines) + "\n"
-
-
 def main(argv=None) -> list[dict]:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cells", nargs="+", default=DEFAULT_CELLS, help="override sets, one per cell (quoted)")
@@ -50,7 +38,7 @@ def main(argv=None) -> list[dict]:
             cfg = compose("config", overrides=overrides)
             t0 = time.perf_counter()
             m = run(cfg, out / f"{i}_{cell.replace(' ', '_').replace('=', '-')}")
-            row = {"cell": cell, "total_time_s": time.perf_counter() - t0,
+            row = {"config": cell, "total_time_s": time.perf_counter() - t0,
                    **{k: m[k] for k, _, _ in COLUMNS if k in m}, "device": m["device"], "history": m["history"]}
             rows.append(row)
             print(f"[{i + 1}/{len(args.cells)}] {cell}: " + ", ".join(
@@ -58,10 +46,8 @@ def main(argv=None) -> list[dict]:
     header = (f"Ablation on `{' '.join(args.set) or 'default scene'}`; device {rows[0]['device']}, "
               f"torch {torch.__version__}, {platform.processor() or platform.machine()}, "
               f"{torch.get_num_threads()} CPU threads")
-    md = markdown(rows, header)
     write_json({"settings": args.set, "rows": rows}, out / "ablation.json")
-    atomic_write(out / "ablation.md", lambda t: Path(t).write_text(md))
-    print(md)
+    print(write_tables(rows, out, "ablation", header))
     return rows
 
 

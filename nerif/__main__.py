@@ -7,13 +7,14 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from nerif.app import run
+from nerif.trainer import DivergenceError
 
 
 @hydra.main(version_base=None, config_path="../conf", config_name="config")
 def main(cfg: DictConfig) -> float:
     try:
         metrics = run(cfg, HydraConfig.get().runtime.output_dir)
-    except (ValueError, KeyError, FileNotFoundError, RuntimeError) as e:
+    except (ValueError, KeyError, FileNotFoundError, DivergenceError) as e:  # bad input: one sentence
         logging.getLogger("nerif").error("%s", e.args[0] if e.args else e)
         if HydraConfig.get().mode.name == "MULTIRUN":
             return float("nan")

@@ -26,7 +26,7 @@ def resolve_device(name: str) -> torch.device:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     dev = torch.device(name)
     if dev.type == "cuda" and not torch.cuda.is_available():
-        raise RuntimeError(f"device={name} was asked for but no CUDA GPU is available; use device=cpu or auto")
+        raise ValueError(f"device={name} was asked for but no CUDA GPU is available; use device=cpu or auto")
     return dev
 
 
@@ -84,6 +84,8 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
 
     metrics = write_outputs(trainer, scene, cfg, out_dir, losses)
     metrics.update(setup_time_s=setup_s, device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
+    if device.type == "cuda":
+        metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
     write_json(metrics, out_dir / "metrics.json")
     print(summary_line(metrics, out_dir), flush=True)
     return metrics
@@ -110,7 +112,6 @@ def write_outputs(trainer: Trainer, scene, cfg: DictConfig, out_dir: Path, losse
     final.pop("iteration", None)
     final.update(trainer.timing())
     final["wall_time_s"] = trainer.train_seconds
-    final["samples_per_ray_mean"] = trainer.sampler.samples_per_ray
     final["history"] = trainer.history
     final["encoder"], final["grad"] = cfg.encoder.name, cfg.grad.name
     if scene.truth_T is not None:

@@ -29,18 +29,23 @@ def collect(sweep_dir: Path) -> list[dict]:
     return rows
 
 
-def write_tables(rows: list[dict], sweep_dir: Path) -> None:
-    present = [c for c in COLUMNS if any(r[c[0]] is not None for r in rows)]
-    md = ["| config | " + " | ".join(h for _, h, _ in present) + " |", "|---" * (len(present) + 1) + "|"]
+def write_tables(rows: list[dict], folder: Path, stem: str = "summary", header: str = "") -> str:
+    """``<stem>.md`` and ``<stem>.csv`` in ``folder``: one row per dict (its 'config' and metric columns).
+    Returns the markdown."""
+    present = [c for c in COLUMNS if any(r.get(c[0]) is not None for r in rows)]
+    md = ([header, ""] if header else []) + ["| config | " + " | ".join(h for _, h, _ in present) + " |",
+                                             "|---" * (len(present) + 1) + "|"]
     for r in rows:
-        md.append(f"| {r['config']} | " + " | ".join("" if r[k] is None else f.format(r[k]) for k, _, f in present) + " |")
-    atomic_write(sweep_dir / "summary.md", lambda t: Path(t).write_text("\n".join(md) + "\n"))
+        md.append(f"| {r['config']} | " + " | ".join("" if r.get(k) is None else f.format(r[k]) for k, _, f in present) + " |")
+    text = "\n".join(md) + "\n"
+    atomic_write(folder / f"{stem}.md", lambda t: Path(t).write_text(text))
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["config"] + [k for k, _, _ in present])
     for r in rows:
-        w.writerow([r["config"]] + [r[k] for k, _, _ in present])
-    atomic_write(sweep_dir / "summary.csv", lambda t: Path(t).write_text(buf.getvalue()))
+        w.writerow([r["config"]] + [r.get(k) for k, _, _ in present])
+    atomic_write(folder / f"{stem}.csv", lambda t: Path(t).write_text(buf.getvalue()))
+    return text
 
 
 class MultirunSummary(Callback):
@@ -50,5 +55,4 @@ class MultirunSummary(Callback):
         sweep_dir = Path(config.hydra.sweep.dir)
         rows = collect(sweep_dir)
         if rows:
-            write_tables(rows, sweep_dir)
-            print((sweep_dir / "summary.md").read_text(), flush=True)
+            print(write_tables(rows, sweep_dir), flush=True)

@@ -61,6 +61,7 @@ class Trainer:
         self.history: list[dict] = []
         self.train_seconds = 0.0
         self.samples_seen = 0
+        self.rays_seen = 0
         self.step_times: list[float] = []
         self.flame_threshold_K = flame_threshold_K
         self._eval_index = self._eval_rays(eval_rays_per_view, seed)
@@ -110,6 +111,7 @@ class Trainer:
         self.train_seconds += dt
         self.step_times.append(dt)
         self.samples_seen += len(samples.positions)
+        self.rays_seen += samples.n_rays
         out = {"loss": loss.item(), "samples_per_ray": len(samples.positions) / max(samples.n_rays, 1)}
         out.update({f"loss_{n}": ((eps[n] - eps_obs) ** 2).sum(-1).mean().item() for n in eps})
         if boundary is not None:
@@ -161,7 +163,7 @@ class Trainer:
         return {"field": self.field.state_dict(), "optimizer": self.optimizer.state_dict(),
                 "scheduler": self.scheduler.state_dict(), "generator": self.generator.get_state(),
                 "iteration": self.iteration, "history": self.history, "train_seconds": self.train_seconds,
-                "samples_seen": self.samples_seen, "step_times": self.step_times}
+                "samples_seen": self.samples_seen, "rays_seen": self.rays_seen, "step_times": self.step_times}
 
     def save(self, path: Path) -> None:
         atomic_save_torch(self.state_dict(), path)
@@ -179,7 +181,7 @@ class Trainer:
         self.optimizer.load_state_dict(st["optimizer"])
         self.scheduler.load_state_dict(st["scheduler"])
         self.generator.set_state(st["generator"].cpu() if self.device.type == "cpu" else st["generator"])
-        for k in ("iteration", "history", "train_seconds", "samples_seen", "step_times"):
+        for k in ("iteration", "history", "train_seconds", "samples_seen", "rays_seen", "step_times"):
             setattr(self, k, st[k])
 
     # --- loop ---
@@ -221,4 +223,5 @@ class Trainer:
     def timing(self) -> dict:
         steps = np.asarray(self.step_times) if self.step_times else np.zeros(1)
         return {"iterations": self.iteration, "ms_per_iteration": float(np.median(steps) * 1e3),
-                "samples_per_second": self.samples_seen / max(self.train_seconds, 1e-9)}
+                "samples_per_second": self.samples_seen / max(self.train_seconds, 1e-9),
+                "samples_per_ray_mean": self.samples_seen / max(self.rays_seen, 1)}

@@ -79,3 +79,13 @@ def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
     assert message in r.stderr + r.stdout
     assert "Traceback" not in r.stderr
     assert not (tmp_path / "checkpoint.pt").exists()
+
+
+@pytest.mark.slow
+def test_the_default_scene_reaches_the_target_error(tmp_path):
+    """`python -m nerif` as a new user runs it: hash + discrete on Phantom 5 under 25 K temperature RMSE."""
+    r = nerif("train.progress=false", f"hydra.run.dir={tmp_path}", cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    assert m["encoder"] == "hash" and m["grad"] == "discrete" and m["iterations"] == 1200
+    assert m["temperature_rmse_K"] < 25.0, m["temperature_rmse_K"]
