@@ -39,13 +39,15 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     # every check that can fail happens here, before any training
     sampler = SAMPLERS.build(cfg.sampler)
     scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device=str(device))
-    field = build_field(cfg, scene.box, gate=MASKS.build(cfg.mask, scene=scene)).to(device)
+    masks = MASKS.build(cfg.mask, scene=scene)
+    field = build_field(cfg, scene.box, gate=masks.gate).to(device)
     tc = cfg.train
     boundary = AmbientBoundary(scene.box, list(cfg.loss.ambient_faces), cfg.loss.ambient_weight, cfg.loss.ambient_points)
     trainer = Trainer(field, scene, sampler, dict(cfg.grad.weights), iterations=tc.iterations, boundary=boundary,
                       rays_per_view=tc.rays_per_view, lr=tc.lr, betas=tuple(tc.betas), eps=tc.eps, lr_min=tc.lr_min,
                       eval_rays_per_view=tc.eval_rays_per_view, flame_threshold_K=cfg.metrics.flame_threshold_K,
-                      seed=cfg.seed)
+                      seed=cfg.seed, inside=masks.inside, outside_fraction=tc.outside_fraction)
+    write_masks(masks, scene, out_dir)
     checkpoint = out_dir / "checkpoint.pt"
     if tc.resume:
         trainer.load(Path(tc.resume))
@@ -89,6 +91,21 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     write_json(metrics, out_dir / "metrics.json")
     print(summary_line(metrics, out_dir), flush=True)
     return metrics
+
+
+def write_masks(masks, scene, out_dir: Path) -> None:
+    """2-D masks as PNGs (one per view) and the 3-D mask as a volume."""
+    import cv2
+
+    from nerif.export import atomic_write
+
+    for v, img in enumerate(masks.images or []):
+        ok, png = cv2.imencode(".png", img.astype(np.uint8) * 255)
+        atomic_write(out_dir / "masks" / f"mask2d_view{v:02d}.png", lambda t, b=png: Path(t).write_bytes(b.tobytes()))
+    if masks.volume is not None:
+        origin = [float(a[0]) for a in scene.box.axes()]
+        write_npz(out_dir / "mask3d.npz", mask=masks.volume, voxel_mm=scene.box.voxel_mm, origin_mm=np.asarray(origin))
+        write_vti(out_dir / "mask3d.vti", scene.box.voxel_mm, origin, mask=masks.volume.astype(np.float32))
 
 
 def write_outputs(trainer: Trainer, scene, cfg: DictConfig, out_dir: Path, losses) -> dict:

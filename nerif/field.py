@@ -46,13 +46,18 @@ class NeuralField(nn.Module):
         nn.init.constant_(last.bias, math.atanh(-self.c / self.k))
         self.mlp = nn.Sequential(*layers, last)
 
+    def network(self, p: torch.Tensor) -> torch.Tensor:
+        """The ungated field, (N, 3) [mm] -> (N,)."""
+        return self.k * torch.tanh(self.mlp(self.encoder(self.box.normalize(p)))[:, 0]) + self.c
+
     def forward(self, p: torch.Tensor) -> torch.Tensor:
-        """(N, 3) world points [mm] -> (N,) sigma."""
-        x = self.box.normalize(p)
-        sigma = self.k * torch.tanh(self.mlp(self.encoder(x))[:, 0]) + self.c
-        if self.gate is not None:
-            sigma = sigma * self.gate(p)
-        return sigma
+        """(N, 3) world points [mm] -> (N,) sigma; the network is not evaluated where the gate is zero."""
+        if self.gate is None:
+            return self.network(p)
+        g = self.gate(p)
+        keep = (g > 0).nonzero()[:, 0]
+        sigma = g.new_zeros(len(p)).to(p.dtype)
+        return sigma.index_put((keep,), self.network(p[keep]) * g[keep])
 
     @torch.no_grad()
     def on_grid(self, box: ProbeBox, chunk: int = 1 << 18) -> torch.Tensor:

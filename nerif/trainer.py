@@ -31,13 +31,16 @@ class Trainer:
         field: the neural field. scene: rays and observations (on the training device).
         sampler: rays -> packed samples. weights: gradient operator -> loss weight (lambda_a, lambda_d).
         boundary: ambient boundary condition (None: none).
+        inside: per view, the scene indices of the rays training draws from (the 2-D masks); None: all rays.
+        outside_fraction: share of each batch drawn from the view's rays outside its 2-D mask.
         iterations, rays_per_view, lr, betas, eps, lr_min: optimisation settings.
         eval_rays_per_view: fixed rays per view for the deflection metrics.
         seed: RNG seed (ray draws and sample offsets).
     """
 
     def __init__(self, field: NeuralField, scene: Scene, sampler, weights: dict, *, iterations: int,
-                 boundary: Optional[AmbientBoundary] = None,
+                 boundary: Optional[AmbientBoundary] = None, inside: Optional[list] = None,
+                 outside_fraction: float = 0.0,
                  rays_per_view: int, lr: float = 2e-2, betas=(0.9, 0.99), eps: float = 1e-8, lr_min: float = 1e-6,
                  eval_rays_per_view: int = 512, flame_threshold_K: float = 1.0, seed: int = 0):
         if rays_per_view < 1:
@@ -49,6 +52,7 @@ class Trainer:
         self.boundary = boundary if boundary is not None and boundary.active else None
         self.iterations, self.rays_per_view = int(iterations), int(rays_per_view)
         self.device = scene.dirs.device
+        self.pools = self._pools(scene, inside, outside_fraction)
         params = list(field.parameters())
         fused = self.device.type == "cuda"
         self.optimizer = torch.optim.Adam(params, lr=lr, betas=tuple(betas), eps=eps, fused=fused)
@@ -62,6 +66,7 @@ class Trainer:
         self.train_seconds = 0.0
         self.samples_seen = 0
         self.rays_seen = 0
+        self.samples_max = 0
         self.step_times: list[float] = []
         self.flame_threshold_K = flame_threshold_K
         self._eval_index = self._eval_rays(eval_rays_per_view, seed)
@@ -79,16 +84,32 @@ class Trainer:
         views = torch.searchsorted(self.scene.view_start, index, right=True) - 1
         return self.scene.origins[views], self.scene.dirs[index], self.scene.eps[index] / self.scale
 
+    def _pools(self, scene: Scene, inside, outside_fraction: float) -> list[list[tuple[torch.Tensor, int]]]:
+        """Per view: (ray indices, how many to draw) pairs."""
+        if not 0.0 <= outside_fraction < 1.0:
+            raise ValueError(f"outside_fraction must be within [0, 1), got {outside_fraction}")
+        pools = []
+        for v in range(scene.n_views):
+            every = torch.arange(int(scene.view_start[v]), int(scene.view_start[v + 1]), device=scene.dirs.device)
+            if inside is None or len(inside[v]) == 0:  # no mask, or an empty one (warned when it was built)
+                pools.append([(every, self.rays_per_view)])
+                continue
+            n_out = int(round(outside_fraction * self.rays_per_view))
+            outside = every[~torch.isin(every, inside[v])]
+            pools.append([(inside[v], self.rays_per_view - n_out)] + ([(outside, n_out)] if n_out and len(outside) else []))
+        return pools
+
     def draw(self, view: int) -> torch.Tensor:
-        start = self.scene.view_start[view]
-        count = int(self.scene.view_start[view + 1] - start)
-        return start + torch.randint(count, (self.rays_per_view,), generator=self.generator, device=self.device)
+        """Scene indices of a batch of rays of ``view`` (inside its 2-D mask, plus the outside share)."""
+        return torch.cat([pool[torch.randint(len(pool), (n,), generator=self.generator, device=self.device)]
+                          for pool, n in self.pools[view]])
 
     # --- optimisation ---
     def step(self) -> dict:
         """One iteration on the next view; returns the loss terms (floats)."""
         t0 = time.perf_counter()
         view = self.iteration % self.scene.n_views
+        self.sampler.update(self.field, self.iteration, self.generator)
         o, d, eps_obs = self.rays(self.draw(view))
         samples = self.sampler(self.scene.box, o, d, self.generator)
         trained = {name: True for name, w in self.weights.items() if w > 0}
@@ -112,7 +133,10 @@ class Trainer:
         self.step_times.append(dt)
         self.samples_seen += len(samples.positions)
         self.rays_seen += samples.n_rays
-        out = {"loss": loss.item(), "samples_per_ray": len(samples.positions) / max(samples.n_rays, 1)}
+        per_ray = samples.per_ray
+        self.samples_max = max(self.samples_max, int(per_ray.max()))
+        out = {"loss": loss.item(), "samples_per_ray": len(samples.positions) / max(samples.n_rays, 1),
+               "rays_skipped": (per_ray == 0).float().mean().item()}
         out.update({f"loss_{n}": ((eps[n] - eps_obs) ** 2).sum(-1).mean().item() for n in eps})
         if boundary is not None:
             out["loss_boundary"] = boundary.item()
@@ -161,6 +185,7 @@ class Trainer:
     # --- checkpoints ---
     def state_dict(self) -> dict:
         return {"field": self.field.state_dict(), "optimizer": self.optimizer.state_dict(),
+                "sampler": self.sampler.state_dict(),
                 "scheduler": self.scheduler.state_dict(), "generator": self.generator.get_state(),
                 "iteration": self.iteration, "history": self.history, "train_seconds": self.train_seconds,
                 "samples_seen": self.samples_seen, "rays_seen": self.rays_seen, "step_times": self.step_times}
@@ -179,6 +204,7 @@ class Trainer:
             raise ValueError(f"checkpoint {path} was made with another field configuration "
                              f"(encoder/field settings differ): {str(e).splitlines()[0]}") from None
         self.optimizer.load_state_dict(st["optimizer"])
+        self.sampler.load_state_dict(st.get("sampler", {}))
         self.scheduler.load_state_dict(st["scheduler"])
         self.generator.set_state(st["generator"].cpu() if self.device.type == "cpu" else st["generator"])
         for k in ("iteration", "history", "train_seconds", "samples_seen", "rays_seen", "step_times"):
@@ -224,4 +250,4 @@ class Trainer:
         steps = np.asarray(self.step_times) if self.step_times else np.zeros(1)
         return {"iterations": self.iteration, "ms_per_iteration": float(np.median(steps) * 1e3),
                 "samples_per_second": self.samples_seen / max(self.train_seconds, 1e-9),
-                "samples_per_ray_mean": self.samples_seen / max(self.rays_seen, 1)}
+                "samples_per_ray_mean": self.samples_seen / max(self.rays_seen, 1), "samples_per_ray_max": self.samples_max}

@@ -2,6 +2,7 @@
 from nerif.renderers.deflection import integrate, render_deflections
 from nerif.renderers.gradients import GRADIENTS
 from nerif.renderers.samplers import SAMPLERS, Samples
+from nerif.renderers import occupancy  # noqa: F401  (registration)
 from nerif.renderers.voxel import gradient_volume, voxel_deflection
 
 __all__ = ["GRADIENTS", "SAMPLERS", "Samples", "integrate", "render_deflections", "gradient_volume",

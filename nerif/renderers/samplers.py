@@ -49,6 +49,15 @@ class UniformSampler:
             raise ValueError(f"samples per ray K must be at least 2, got {samples_per_ray}")
         self.samples_per_ray, self.jitter = int(samples_per_ray), jitter
 
+    def update(self, field, iteration: int, generator: Optional[torch.Generator] = None) -> None:
+        """Called before every training iteration; the uniform sampler keeps no state."""
+
+    def state_dict(self) -> dict:
+        return {}
+
+    def load_state_dict(self, state: dict) -> None:
+        pass
+
     def __call__(self, box: ProbeBox, origins: torch.Tensor, dirs: torch.Tensor,
                  generator: Optional[torch.Generator] = None) -> Samples:
         """origins, dirs: (R, 3) -> Samples with K samples per ray that hits the box."""
