@@ -19,11 +19,23 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from nerif.app import run
-from nerif.export import write_json
+from nerif.export import atomic_write, write_json
 from nerif.summary import COLUMNS, write_tables
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 DEFAULT_CELLS = [f"encoder={e} grad={g}" for e in ("none", "frequency", "hash") for g in ("auto", "discrete", "hybrid")]
+def progress_table(rows: list[dict], out: Path) -> str:
+    """Temperature RMSE [K] against training progress: a row per evaluation, a column per cell."""
+    its = sorted({h["iteration"] for r in rows for h in r["history"]})
+    cols = [{h["iteration"]: h.get("temperature_rmse_K") for h in r["history"]} for r in rows]
+    lines = ["| iteration | " + " | ".join(r["config"] for r in rows) + " |", "|---" * (len(rows) + 1) + "|"]
+    for it in its:
+        lines.append(f"| {it} | " + " | ".join("" if c.get(it) is None else f"{c[it]:.1f}" for c in cols) + " |")
+    text = "\n".join(lines) + "\n"
+    atomic_write(out / "progress.md", lambda t: Path(t).write_text(text))
+    return text
+
+
 def main(argv=None) -> list[dict]:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cells", nargs="+", default=DEFAULT_CELLS, help="override sets, one per cell (quoted)")
@@ -48,6 +60,7 @@ def main(argv=None) -> list[dict]:
               f"{torch.get_num_threads()} CPU threads")
     write_json({"settings": args.set, "rows": rows}, out / "ablation.json")
     print(write_tables(rows, out, "ablation", header))
+    print(progress_table(rows, out))
     return rows
 
 

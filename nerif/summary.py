@@ -15,6 +15,7 @@ from nerif.export import atomic_write
 COLUMNS = [("temperature_rmse_K", "T RMSE [K]", "{:.2f}"), ("temperature_rmse_flame_K", "T RMSE flame [K]", "{:.2f}"),
            ("deflection_rmse", "deflection RMSE [rad]", "{:.3e}"), ("wall_time_s", "wall time [s]", "{:.1f}"),
            ("ms_per_iteration", "ms/it", "{:.1f}"), ("samples_per_second", "samples/s", "{:.3g}"),
+           ("samples_per_ray_mean", "samples/ray", "{:.1f}"),
            ("iterations", "iterations", "{}")]
 
 

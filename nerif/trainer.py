@@ -67,6 +67,7 @@ class Trainer:
         self.samples_seen = 0
         self.rays_seen = 0
         self.samples_max = 0
+        self.rays_skipped = 0
         self.step_times: list[float] = []
         self.flame_threshold_K = flame_threshold_K
         self._eval_index = self._eval_rays(eval_rays_per_view, seed)
@@ -135,6 +136,7 @@ class Trainer:
         self.rays_seen += samples.n_rays
         per_ray = samples.per_ray
         self.samples_max = max(self.samples_max, int(per_ray.max()))
+        self.rays_skipped += int((per_ray == 0).sum())
         out = {"loss": loss.item(), "samples_per_ray": len(samples.positions) / max(samples.n_rays, 1),
                "rays_skipped": (per_ray == 0).float().mean().item()}
         out.update({f"loss_{n}": ((eps[n] - eps_obs) ** 2).sum(-1).mean().item() for n in eps})
@@ -188,7 +190,8 @@ class Trainer:
                 "sampler": self.sampler.state_dict(),
                 "scheduler": self.scheduler.state_dict(), "generator": self.generator.get_state(),
                 "iteration": self.iteration, "history": self.history, "train_seconds": self.train_seconds,
-                "samples_seen": self.samples_seen, "rays_seen": self.rays_seen, "step_times": self.step_times}
+                "samples_seen": self.samples_seen, "rays_seen": self.rays_seen, "step_times": self.step_times,
+                "samples_max": self.samples_max, "rays_skipped": self.rays_skipped}
 
     def save(self, path: Path) -> None:
         atomic_save_torch(self.state_dict(), path)
@@ -207,7 +210,8 @@ class Trainer:
         self.sampler.load_state_dict(st.get("sampler", {}))
         self.scheduler.load_state_dict(st["scheduler"])
         self.generator.set_state(st["generator"].cpu() if self.device.type == "cpu" else st["generator"])
-        for k in ("iteration", "history", "train_seconds", "samples_seen", "rays_seen", "step_times"):
+        for k in ("iteration", "history", "train_seconds", "samples_seen", "rays_seen", "step_times", "samples_max",
+                  "rays_skipped"):
             setattr(self, k, st[k])
 
     # --- loop ---
@@ -249,5 +253,7 @@ class Trainer:
     def timing(self) -> dict:
         steps = np.asarray(self.step_times) if self.step_times else np.zeros(1)
         return {"iterations": self.iteration, "ms_per_iteration": float(np.median(steps) * 1e3),
+                "ms_per_iteration_mean": float(np.mean(steps) * 1e3),
                 "samples_per_second": self.samples_seen / max(self.train_seconds, 1e-9),
-                "samples_per_ray_mean": self.samples_seen / max(self.rays_seen, 1), "samples_per_ray_max": self.samples_max}
+                "samples_per_ray_mean": self.samples_seen / max(self.rays_seen, 1), "samples_per_ray_max": self.samples_max,
+                "rays_skipped_fraction": self.rays_skipped / max(self.rays_seen, 1)}
