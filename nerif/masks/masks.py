@@ -65,7 +65,7 @@ class MaskGate:
         self.volume = torch.as_tensor(volume, dtype=torch.float32, device=device)
 
     def __call__(self, p: torch.Tensor) -> torch.Tensor:
-        return sample_volume(self.volume, self.box, p.detach(), padding="border")
+        return sample_volume(self.volume, self.box, p, padding="border")
 
 
 def _inside(scene, images) -> list[torch.Tensor]:
