@@ -5,12 +5,13 @@ import logging
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
 from nerif.data import DATASETS
-from nerif.export import write_json, write_npz, write_vti
+from nerif.export import atomic_write, write_json, write_npz, write_vti
 from nerif.field import build_field
 from nerif.losses import AmbientBoundary
 from nerif.masks import MASKS
@@ -95,10 +96,6 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
 
 def write_masks(masks, scene, out_dir: Path) -> None:
     """2-D masks as PNGs (one per view) and the 3-D mask as a volume."""
-    import cv2
-
-    from nerif.export import atomic_write
-
     for v, img in enumerate(masks.images or []):
         ok, png = cv2.imencode(".png", img.astype(np.uint8) * 255)
         atomic_write(out_dir / "masks" / f"mask2d_view{v:02d}.png", lambda t, b=png: Path(t).write_bytes(b.tobytes()))

@@ -56,8 +56,7 @@ class NeuralField(nn.Module):
             return self.network(p)
         g = self.gate(p)
         keep = (g > 0).nonzero()[:, 0]
-        sigma = g.new_zeros(len(p)).to(p.dtype)
-        return sigma.index_put((keep,), self.network(p[keep]) * g[keep])
+        return p.new_zeros(len(p)).index_put((keep,), self.network(p[keep]) * g[keep])
 
     @torch.no_grad()
     def on_grid(self, box: ProbeBox, chunk: int = 1 << 18) -> torch.Tensor:

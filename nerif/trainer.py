@@ -12,7 +12,7 @@ import torch
 from nerif.data import Scene
 from nerif.export import atomic_save_torch
 from nerif.field import NeuralField
-from nerif.losses import AmbientBoundary, deflection_mse
+from nerif.losses import AmbientBoundary, deflection_terms, weighted_sum
 from nerif.metrics import deflection_rmse, flame_region, rmse
 from nerif.renderers import render_deflections
 from nerif.renderers.samplers import UniformSampler
@@ -91,7 +91,8 @@ class Trainer:
             raise ValueError(f"outside_fraction must be within [0, 1), got {outside_fraction}")
         pools = []
         for v in range(scene.n_views):
-            every = torch.arange(int(scene.view_start[v]), int(scene.view_start[v + 1]), device=scene.dirs.device)
+            sl = scene.view_slice(v)
+            every = torch.arange(sl.start, sl.stop, device=scene.dirs.device)
             if inside is None or len(inside[v]) == 0:  # no mask, or an empty one (warned when it was built)
                 pools.append([(every, self.rays_per_view)])
                 continue
@@ -115,7 +116,8 @@ class Trainer:
         samples = self.sampler(self.scene.box, o, d, self.generator)
         trained = {name: True for name, w in self.weights.items() if w > 0}
         eps = render_deflections(self.field, samples, trained, self.step_mm)
-        loss = deflection_mse(eps, eps_obs, self.weights)
+        terms = deflection_terms(eps, eps_obs)
+        loss = weighted_sum(terms, self.weights)
         boundary = self.boundary(self.field, self.generator) if self.boundary is not None else None
         if boundary is not None:
             loss = loss + boundary
@@ -139,7 +141,7 @@ class Trainer:
         self.rays_skipped += int((per_ray == 0).sum())
         out = {"loss": loss.item(), "samples_per_ray": len(samples.positions) / max(samples.n_rays, 1),
                "rays_skipped": (per_ray == 0).float().mean().item()}
-        out.update({f"loss_{n}": ((eps[n] - eps_obs) ** 2).sum(-1).mean().item() for n in eps})
+        out.update({f"loss_{n}": t.item() for n, t in terms.items()})
         if boundary is not None:
             out["loss_boundary"] = boundary.item()
         return out

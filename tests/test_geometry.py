@@ -11,6 +11,8 @@ def test_box_axes_and_normalisation():
     p = torch.tensor([[1.0, 1.5, -1.0]])
     np.testing.assert_allclose(box.normalize(p).numpy(), [[2 / 3, 1.0, -2 / 3]])
     np.testing.assert_allclose(box.to_grid(p).numpy(), [[1.0, 1.0, -1.0]])
+    q = torch.rand(20, 3) * 4 - 2
+    torch.testing.assert_close(box.from_grid(box.to_grid(q)), q)
 
 
 def test_sample_volume_reproduces_a_linear_field_and_voxel_values():

@@ -57,6 +57,10 @@ class Scene:
     def n_views(self) -> int:
         return len(self.cameras)
 
+    def view_slice(self, view: int) -> slice:
+        """The rays of ``view`` in ``dirs``, ``eps`` and ``pixel``."""
+        return slice(int(self.view_start[view]), int(self.view_start[view + 1]))
+
     def view_counts(self) -> torch.Tensor:
         return self.view_start[1:] - self.view_start[:-1]
 

@@ -65,6 +65,10 @@ class ProbeBox:
         """World [mm] -> ``grid_sample`` coordinates (per axis, box faces at -1 and +1). (..., 3) -> (..., 3)."""
         return p / torch.as_tensor(self.half_mm, dtype=p.dtype, device=p.device)
 
+    def from_grid(self, g: torch.Tensor) -> torch.Tensor:
+        """Inverse of :meth:`to_grid`: per-axis [-1, 1] (box faces) -> world [mm]. (..., 3) -> (..., 3)."""
+        return g * torch.as_tensor(self.half_mm, dtype=g.dtype, device=g.device)
+
     def contains(self, p: torch.Tensor) -> torch.Tensor:
         """(..., 3) [mm] -> (...) bool."""
         return (p.abs() <= torch.as_tensor(self.half_mm, dtype=p.dtype, device=p.device)).all(-1)

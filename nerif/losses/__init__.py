@@ -10,6 +10,19 @@ from nerif.geometry import ProbeBox
 _AXES = {"x": 0, "y": 1, "z": 2}
 
 
+def deflection_terms(eps: Mapping[str, torch.Tensor], eps_obs: torch.Tensor) -> dict:
+    """Operator name -> mean over rays of ``|eps_op - eps_obs|^2``; (R, 3) each, normalised units."""
+    return {name: ((e - eps_obs) ** 2).sum(-1).mean() for name, e in eps.items()}
+
+
+def weighted_sum(terms: Mapping[str, torch.Tensor], weights: Mapping[str, float]) -> torch.Tensor:
+    """``sum_op lambda_op * term_op`` over the operators with a positive weight."""
+    parts = [w * terms[name] for name, w in weights.items() if w > 0]
+    if not parts:
+        raise ValueError("every gradient-loss weight is zero: nothing to train on (set grad.weights)")
+    return torch.stack(parts).sum()
+
+
 def deflection_mse(eps: Mapping[str, torch.Tensor], eps_obs: torch.Tensor, weights: Mapping[str, float]) -> torch.Tensor:
     """``sum_op lambda_op * mean over rays |eps_op - eps_obs|^2`` over the operators with a positive weight.
 
@@ -18,10 +31,7 @@ def deflection_mse(eps: Mapping[str, torch.Tensor], eps_obs: torch.Tensor, weigh
         eps_obs: (R, 3) observed deflection in the same units.
         weights: operator name -> lambda (e.g. lambda_a for ``auto``, lambda_d for ``discrete``).
     """
-    terms = [w * ((eps[name] - eps_obs) ** 2).sum(-1).mean() for name, w in weights.items() if w > 0]
-    if not terms:
-        raise ValueError("every gradient-loss weight is zero: nothing to train on (set grad.weights)")
-    return torch.stack(terms).sum()
+    return weighted_sum(deflection_terms(eps, eps_obs), weights)
 
 
 class AmbientBoundary:
@@ -52,13 +62,12 @@ class AmbientBoundary:
 
     def sample(self, generator: Optional[torch.Generator], device) -> torch.Tensor:
         """(points, 3) uniform points on the ambient faces [mm]."""
-        half = torch.as_tensor(self.box.half_mm, dtype=torch.float32, device=device)
-        p = (torch.rand(self.points, 3, generator=generator, device=device) * 2 - 1) * half
+        g = torch.rand(self.points, 3, generator=generator, device=device) * 2 - 1
         axis = torch.as_tensor(self.axes, device=device)[
             torch.randint(len(self.axes), (self.points,), generator=generator, device=device)]
         side = torch.randint(2, (self.points,), generator=generator, device=device) * 2 - 1
-        p[torch.arange(self.points, device=device), axis] = side * half[axis]
-        return p
+        g[torch.arange(self.points, device=device), axis] = side.float()
+        return self.box.from_grid(g)
 
     def __call__(self, field, generator: Optional[torch.Generator] = None) -> torch.Tensor:
         device = next(field.parameters()).device

@@ -21,7 +21,7 @@ def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2) -> lis
     """
     out = []
     for v, cam in enumerate(scene.cameras):
-        sl = slice(int(scene.view_start[v]), int(scene.view_start[v + 1]))
+        sl = scene.view_slice(v)
         mag2 = (scene.eps[sl].double() ** 2).sum(-1).cpu().numpy()
         img = np.zeros(cam.height * cam.width, dtype=np.float64)
         peak = mag2.max() if mag2.size else 0.0
@@ -71,7 +71,7 @@ class MaskGate:
 def _inside(scene, images) -> list[torch.Tensor]:
     inside = []
     for v, img in enumerate(images):
-        sl = slice(int(scene.view_start[v]), int(scene.view_start[v + 1]))
+        sl = scene.view_slice(v)
         flat = torch.as_tensor(img.reshape(-1), device=scene.pixel.device)
         idx = torch.arange(sl.start, sl.stop, device=scene.pixel.device)[flat[scene.pixel[sl]]]
         inside.append(idx)

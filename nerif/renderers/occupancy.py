@@ -52,7 +52,7 @@ class OccupancySampler(UniformSampler):
         self.resolution, self.decay, self.threshold = int(resolution), float(decay), float(threshold)
         self.update_every, self.warmup, self.full_updates = int(update_every), int(warmup), int(full_updates)
         self.subset_fraction = float(subset_fraction)
-        self.density: Optional[torch.Tensor] = None  # (R^3,) float, -inf = never visited
+        self.density: Optional[torch.Tensor] = None  # (R^3,) float, +inf = never visited (occupied)
         self.bits: Optional[torch.Tensor] = None  # (R^3 / 8,) uint8
         self.updates = 0
 
@@ -88,8 +88,7 @@ class OccupancySampler(UniformSampler):
             cells = torch.randperm(n, generator=generator, device=device)[: max(1, int(self.subset_fraction * n))]
         ijk = torch.stack([cells // (R * R), (cells // R) % R, cells % R], -1).float()
         u = (ijk + torch.rand(len(cells), 3, generator=generator, device=device)) / R  # jittered, in [0, 1)
-        half = torch.as_tensor(field.box.half_mm, dtype=torch.float32, device=device)
-        p = (u * 2 - 1) * half
+        p = field.box.from_grid(u * 2 - 1)
         sigma = torch.cat([field(p[i:i + (1 << 18)]).abs() for i in range(0, len(p), 1 << 18)])
         old = self.density[cells]
         old = torch.where(torch.isinf(old), torch.zeros_like(old), old)  # first visit: no history
