@@ -24,6 +24,8 @@ from nerif.summary import COLUMNS, write_tables
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 DEFAULT_CELLS = [f"encoder={e} grad={g}" for e in ("none", "frequency", "hash") for g in ("auto", "discrete", "hybrid")]
+
+
 def progress_table(rows: list[dict], out: Path) -> str:
     """Temperature RMSE [K] against training progress: a row per evaluation, a column per cell."""
     its = sorted({h["iteration"] for r in rows for h in r["history"]})
@@ -36,6 +38,28 @@ def progress_table(rows: list[dict], out: Path) -> str:
     return text
 
 
+def run_cells(cells: list[str], settings: list[str], out: Path) -> list[dict]:
+    """Each cell (a string of overrides, plus ``settings``) through :func:`nerif.app.run`, one after the other in
+    this process; returns one row per cell: its metrics, total time and evaluation history."""
+    rows = []
+    with initialize_config_dir(config_dir=str(CONF), version_base=None):
+        for i, cell in enumerate(cells):
+            cfg = compose("config", overrides=list(settings) + cell.split() + ["train.progress=false"])
+            t0 = time.perf_counter()
+            m = run(cfg, out / f"{i}_{cell.replace(' ', '_').replace('=', '-')}")
+            row = {"config": cell, "total_time_s": time.perf_counter() - t0,
+                   **{k: m[k] for k, _, _ in COLUMNS if k in m}, "device": m["device"], "history": m["history"]}
+            rows.append(row)
+            print(f"[{i + 1}/{len(cells)}] {cell}: " + ", ".join(
+                f"{h} {f.format(row[k])}" for k, h, f in COLUMNS if k in row), flush=True)
+    return rows
+
+
+def header(settings: list[str], rows: list[dict]) -> str:
+    return (f"`{' '.join(settings) or 'default scene'}`; device {rows[0]['device']}, torch {torch.__version__}, "
+            f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} CPU threads")
+
+
 def main(argv=None) -> list[dict]:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cells", nargs="+", default=DEFAULT_CELLS, help="override sets, one per cell (quoted)")
@@ -43,23 +67,9 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--out", default="benchmarks/results/ablation", help="output folder")
     args = ap.parse_args(argv)
     out = Path(args.out)
-    rows = []
-    with initialize_config_dir(config_dir=str(CONF), version_base=None):
-        for i, cell in enumerate(args.cells):
-            overrides = list(args.set) + cell.split() + ["train.progress=false"]
-            cfg = compose("config", overrides=overrides)
-            t0 = time.perf_counter()
-            m = run(cfg, out / f"{i}_{cell.replace(' ', '_').replace('=', '-')}")
-            row = {"config": cell, "total_time_s": time.perf_counter() - t0,
-                   **{k: m[k] for k, _, _ in COLUMNS if k in m}, "device": m["device"], "history": m["history"]}
-            rows.append(row)
-            print(f"[{i + 1}/{len(args.cells)}] {cell}: " + ", ".join(
-                f"{h} {f.format(row[k])}" for k, h, f in COLUMNS if k in row), flush=True)
-    header = (f"Ablation on `{' '.join(args.set) or 'default scene'}`; device {rows[0]['device']}, "
-              f"torch {torch.__version__}, {platform.processor() or platform.machine()}, "
-              f"{torch.get_num_threads()} CPU threads")
+    rows = run_cells(args.cells, args.set, out)
     write_json({"settings": args.set, "rows": rows}, out / "ablation.json")
-    print(write_tables(rows, out, "ablation", header))
+    print(write_tables(rows, out, "ablation", "Ablation on " + header(args.set, rows)))
     print(progress_table(rows, out))
     return rows
 

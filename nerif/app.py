@@ -12,12 +12,9 @@ from omegaconf import DictConfig, OmegaConf
 
 from nerif.data import DATASETS
 from nerif.export import atomic_write, write_json, write_npz, write_vti
-from nerif.field import build_field
-from nerif.losses import AmbientBoundary
 from nerif.masks import MASKS
-from nerif.plots import curves_figure, save_figure, slice_figure
-from nerif.renderers import SAMPLERS
-from nerif.trainer import Trainer
+from nerif.plots import curves_figure, save_figure, sensing_figure, slice_figure
+from nerif.solvers import SOLVERS
 
 log = logging.getLogger(__name__)
 
@@ -38,17 +35,13 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     device = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
     # every check that can fail happens here, before any training
-    sampler = SAMPLERS.build(cfg.sampler)
+    make_solver = SOLVERS.get(cfg.solver.name)(cfg)
     scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device=str(device))
     masks = MASKS.build(cfg.mask, scene=scene)
-    field = build_field(cfg, scene.box, gate=masks.gate).to(device)
+    trainer = make_solver(scene, masks)
     tc = cfg.train
-    boundary = AmbientBoundary(scene.box, list(cfg.loss.ambient_faces), cfg.loss.ambient_weight, cfg.loss.ambient_points)
-    trainer = Trainer(field, scene, sampler, dict(cfg.grad.weights), iterations=tc.iterations, boundary=boundary,
-                      rays_per_view=tc.rays_per_view, lr=tc.lr, betas=tuple(tc.betas), eps=tc.eps, lr_min=tc.lr_min,
-                      eval_rays_per_view=tc.eval_rays_per_view, flame_threshold_K=cfg.metrics.flame_threshold_K,
-                      seed=cfg.seed, inside=masks.inside, outside_fraction=tc.outside_fraction)
     write_masks(masks, scene, out_dir)
+    write_sensing(scene, out_dir)
     checkpoint = out_dir / "checkpoint.pt"
     if tc.resume:
         trainer.load(Path(tc.resume))
@@ -65,7 +58,6 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
         if it % 10 == 0:
             for k, v in terms.items():
                 writer.add_scalar(f"train/{k}", v, it)
-            writer.add_scalar("train/lr", trainer.optimizer.param_groups[0]["lr"], it)
 
     def on_eval(m: dict) -> None:
         it = m["iteration"]
@@ -77,10 +69,10 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
             writer.add_figure("slices", slice_figure(T, scene.box, scene.truth_T, f"iteration {it}"), it)
         writer.flush()
 
-    log.info("%s: %d views, %d rays; field %s, grad %s, %d parameters, device %s", cfg.data.name, scene.n_views,
-             len(scene.dirs), cfg.encoder.name, cfg.grad.name, sum(p.numel() for p in field.parameters()), device)
+    log.info("%s: %d views, %d rays; %s, device %s", cfg.data.name, scene.n_views, len(scene.dirs),
+             ", ".join(f"{k} {v}" for k, v in trainer.labels.items()), device)
     try:
-        trainer.fit(eval_every=tc.eval_every, checkpoint_every=tc.checkpoint_every, checkpoint=checkpoint,
+        trainer.fit(eval_every=cfg.solver.eval_every, checkpoint_every=tc.checkpoint_every, checkpoint=checkpoint,
                     on_eval=on_eval, on_step=on_step, progress=tc.progress)
     finally:
         writer.close()
@@ -97,15 +89,33 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
 def write_masks(masks, scene, out_dir: Path) -> None:
     """2-D masks as PNGs (one per view) and the 3-D mask as a volume."""
     for v, img in enumerate(masks.images or []):
-        ok, png = cv2.imencode(".png", img.astype(np.uint8) * 255)
-        atomic_write(out_dir / "masks" / f"mask2d_view{v:02d}.png", lambda t, b=png: Path(t).write_bytes(b.tobytes()))
+        write_png(out_dir / "masks" / f"mask2d_view{v:02d}.png", img.astype(np.uint8) * 255)
     if masks.volume is not None:
         origin = [float(a[0]) for a in scene.box.axes()]
         write_npz(out_dir / "mask3d.npz", mask=masks.volume, voxel_mm=scene.box.voxel_mm, origin_mm=np.asarray(origin))
         write_vti(out_dir / "mask3d.vti", scene.box.voxel_mm, origin, mask=masks.volume.astype(np.float32))
 
 
-def write_outputs(trainer: Trainer, scene, cfg: DictConfig, out_dir: Path, losses) -> dict:
+def write_png(path: Path, image: np.ndarray) -> None:
+    ok, png = cv2.imencode(".png", image)
+    atomic_write(path, lambda t: Path(t).write_bytes(png.tobytes()))
+
+
+def write_sensing(scene, out_dir: Path) -> None:
+    """Realistic sensing, per view: the reference and distorted images (8-bit PNG, as a camera would save
+    them) and a figure of images and displacements."""
+    rec = scene.sensing
+    if rec is None:
+        return
+    for v, cam in enumerate(scene.cameras):
+        write_png(out_dir / "sensing" / f"reference_view{v:02d}.png", rec["reference"][v])
+        write_png(out_dir / "sensing" / f"distorted_view{v:02d}.png", rec["distorted"][v])
+        save_figure(sensing_figure(rec, v, title=f"{cam.name}: displacement RMSE of the flow "
+                                   f"{float(rec['displacement_rmse_px']):.3f} px (all views)"),
+                    out_dir / "sensing" / f"view{v:02d}.png")
+
+
+def write_outputs(trainer, scene, cfg: DictConfig, out_dir: Path, losses) -> dict:
     """Volumes (.npz, .vti), slice and curve PNGs, and the metrics of the final state."""
     amb, box = scene.ambient, scene.box
     sigma = trainer.reconstruction()
@@ -119,15 +129,18 @@ def write_outputs(trainer: Trainer, scene, cfg: DictConfig, out_dir: Path, losse
     write_npz(out_dir / "reconstruction.npz", voxel_mm=box.voxel_mm, origin_mm=np.asarray(origin), T0=amb.T0, n0=amb.n0,
               delta_thre=amb.delta_thre, **vols)
     write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, **vols)
-    save_figure(slice_figure(T, box, scene.truth_T, f"{cfg.encoder.name} + {cfg.grad.name}, "
-                             f"{trainer.iteration} iterations"), out_dir / "slices.png")
+    label = " + ".join(str(v) for k, v in trainer.labels.items() if k != "lam")
+    save_figure(slice_figure(T, box, scene.truth_T, f"{label}, {trainer.iteration} iterations"), out_dir / "slices.png")
     save_figure(curves_figure(trainer.history, losses), out_dir / "curves.png")
     final = dict(trainer.history[-1]) if trainer.history else trainer.evaluate()
     final.pop("iteration", None)
     final.update(trainer.timing())
     final["wall_time_s"] = trainer.train_seconds
     final["history"] = trainer.history
-    final["encoder"], final["grad"] = cfg.encoder.name, cfg.grad.name
+    final.update(trainer.labels)
+    if scene.sensing is not None:
+        final["displacement_rmse_px"] = float(scene.sensing["displacement_rmse_px"])
+        final["circle_of_confusion_px"] = float(scene.sensing["circle_of_confusion_px"])
     if scene.truth_T is not None:
         final["temperature_note"] = ("temperature from n assuming an air-dominated gas of fixed composition "
                                      "(n - 1 = T0 (n0 - 1) / T)")

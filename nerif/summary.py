@@ -16,6 +16,7 @@ COLUMNS = [("temperature_rmse_K", "T RMSE [K]", "{:.2f}"), ("temperature_rmse_fl
            ("deflection_rmse", "deflection RMSE [rad]", "{:.3e}"), ("wall_time_s", "wall time [s]", "{:.1f}"),
            ("ms_per_iteration", "ms/it", "{:.1f}"), ("samples_per_second", "samples/s", "{:.3g}"),
            ("samples_per_ray_mean", "samples/ray", "{:.1f}"),
+           ("displacement_rmse_px", "displacement RMSE [px]", "{:.3f}"),
            ("iterations", "iterations", "{}")]
 
 

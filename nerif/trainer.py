@@ -1,30 +1,26 @@
 """Training a neural field on a scene's deflections: the optimisation state and its loop."""
 from __future__ import annotations
 
-import logging
 import time
-from pathlib import Path
-from typing import Callable, Optional
+from typing import Optional
 
 import numpy as np
 import torch
 
 from nerif.data import Scene
-from nerif.export import atomic_save_torch
 from nerif.field import NeuralField
 from nerif.losses import AmbientBoundary, deflection_terms, weighted_sum
-from nerif.metrics import deflection_rmse, flame_region, rmse
+from nerif.loop import IterativeSolver
+from nerif.metrics import deflection_rmse
 from nerif.renderers import render_deflections
 from nerif.renderers.samplers import UniformSampler
-
-log = logging.getLogger(__name__)
 
 
 class DivergenceError(RuntimeError):
     """The loss became NaN or infinite."""
 
 
-class Trainer:
+class Trainer(IterativeSolver):
     """Adam + cosine annealing on random rays of one view per iteration (views cycled).
 
     Args:
@@ -38,6 +34,8 @@ class Trainer:
         seed: RNG seed (ray draws and sample offsets).
     """
 
+    name = "nerif"
+
     def __init__(self, field: NeuralField, scene: Scene, sampler, weights: dict, *, iterations: int,
                  boundary: Optional[AmbientBoundary] = None, inside: Optional[list] = None,
                  outside_fraction: float = 0.0,
@@ -45,13 +43,11 @@ class Trainer:
                  eval_rays_per_view: int = 512, flame_threshold_K: float = 1.0, seed: int = 0):
         if rays_per_view < 1:
             raise ValueError(f"rays per view must be at least 1, got {rays_per_view}")
-        if iterations < 1:
-            raise ValueError(f"iterations must be at least 1, got {iterations}")
-        self.field, self.scene, self.sampler = field, scene, sampler
+        super().__init__(scene, iterations, flame_threshold_K)
+        self.field, self.sampler = field, sampler
         self.weights = {k: float(v) for k, v in weights.items()}
         self.boundary = boundary if boundary is not None and boundary.active else None
-        self.iterations, self.rays_per_view = int(iterations), int(rays_per_view)
-        self.device = scene.dirs.device
+        self.rays_per_view = int(rays_per_view)
         self.pools = self._pools(scene, inside, outside_fraction)
         params = list(field.parameters())
         fused = self.device.type == "cuda"
@@ -61,15 +57,10 @@ class Trainer:
         # central-difference step: b_min / (2 K), K the most samples per ray
         self.step_mm = scene.box.shortest_side_mm / (2 * sampler.samples_per_ray)
         self.scale = scene.ambient.delta_thre  # rad per unit of sigma deflection
-        self.iteration = 0
-        self.history: list[dict] = []
-        self.train_seconds = 0.0
         self.samples_seen = 0
         self.rays_seen = 0
         self.samples_max = 0
         self.rays_skipped = 0
-        self.step_times: list[float] = []
-        self.flame_threshold_K = flame_threshold_K
         self._eval_index = self._eval_rays(eval_rays_per_view, seed)
         self._eval_sampler = UniformSampler(sampler.samples_per_ray, jitter=False)
 
@@ -84,6 +75,10 @@ class Trainer:
         """Ray origins, directions and observed deflections (sigma units) of scene rays ``index``."""
         views = torch.searchsorted(self.scene.view_start, index, right=True) - 1
         return self.scene.origins[views], self.scene.dirs[index], self.scene.eps[index] / self.scale
+
+    def _measured(self, d: torch.Tensor) -> Optional[torch.Tensor]:
+        """Ray directions to project the rendered deflections with, when only their perpendicular part is measured."""
+        return d if self.scene.perpendicular_only else None
 
     def _pools(self, scene: Scene, inside, outside_fraction: float) -> list[list[tuple[torch.Tensor, int]]]:
         """Per view: (ray indices, how many to draw) pairs."""
@@ -115,7 +110,7 @@ class Trainer:
         o, d, eps_obs = self.rays(self.draw(view))
         samples = self.sampler(self.scene.box, o, d, self.generator)
         trained = {name: True for name, w in self.weights.items() if w > 0}
-        eps = render_deflections(self.field, samples, trained, self.step_mm)
+        eps = render_deflections(self.field, samples, trained, self.step_mm, dirs=self._measured(d))
         terms = deflection_terms(eps, eps_obs)
         loss = weighted_sum(terms, self.weights)
         boundary = self.boundary(self.field, self.generator) if self.boundary is not None else None
@@ -128,18 +123,15 @@ class Trainer:
         loss.backward()
         self.optimizer.step()
         self.scheduler.step()
-        self.iteration += 1
         if self.device.type == "cuda":
             torch.cuda.synchronize()
-        dt = time.perf_counter() - t0
-        self.train_seconds += dt
-        self.step_times.append(dt)
+        self._timed(time.perf_counter() - t0)
         self.samples_seen += len(samples.positions)
         self.rays_seen += samples.n_rays
         per_ray = samples.per_ray
         self.samples_max = max(self.samples_max, int(per_ray.max()))
         self.rays_skipped += int((per_ray == 0).sum())
-        out = {"loss": loss.item(), "samples_per_ray": len(samples.positions) / max(samples.n_rays, 1),
+        out = {"loss": loss.item(), "lr": self.optimizer.param_groups[0]["lr"], "samples_per_ray": len(samples.positions) / max(samples.n_rays, 1),
                "rays_skipped": (per_ray == 0).float().mean().item()}
         out.update({f"loss_{n}": t.item() for n, t in terms.items()})
         if boundary is not None:
@@ -161,22 +153,15 @@ class Trainer:
         out = {n: [] for n in operators}
         for i in range(0, len(index), 4096):
             s = self._eval_sampler(self.scene.box, o[i:i + 4096], d[i:i + 4096])
-            eps = render_deflections(self.field, s, {n: False for n in operators}, self.step_mm)
+            eps = render_deflections(self.field, s, {n: False for n in operators}, self.step_mm,
+                                     dirs=self._measured(d[i:i + 4096]))
             for n in operators:
                 out[n].append(eps[n] * self.scale)
         return {n: torch.cat(v) for n, v in out.items()}
 
     def evaluate(self) -> dict:
         """Metrics now: temperature/sigma errors on the grid (when the truth is known), deflection errors."""
-        sigma = self.reconstruction()
-        amb = self.scene.ambient
-        m = {"iteration": self.iteration, "wall_time_s": self.train_seconds}
-        if self.scene.truth_T is not None:
-            T = amb.temperature_from_sigma(sigma)
-            Tt = self.scene.truth_T
-            m["temperature_rmse_K"] = rmse(T, Tt)
-            m["temperature_rmse_flame_K"] = rmse(T, Tt, flame_region(Tt, amb.T0, self.flame_threshold_K))
-            m["sigma_rmse"] = rmse(sigma, amb.sigma_from_temperature(Tt))
+        m = {"iteration": self.iteration, "wall_time_s": self.train_seconds, **self.field_errors(self.reconstruction())}
         eps = self.predicted_deflections(self._eval_index)
         obs = self.scene.eps[self._eval_index]
         for n, e in eps.items():
@@ -188,74 +173,26 @@ class Trainer:
 
     # --- checkpoints ---
     def state_dict(self) -> dict:
-        return {"field": self.field.state_dict(), "optimizer": self.optimizer.state_dict(),
-                "sampler": self.sampler.state_dict(),
-                "scheduler": self.scheduler.state_dict(), "generator": self.generator.get_state(),
-                "iteration": self.iteration, "history": self.history, "train_seconds": self.train_seconds,
-                "samples_seen": self.samples_seen, "rays_seen": self.rays_seen, "step_times": self.step_times,
+        return {**super().state_dict(), "field": self.field.state_dict(), "optimizer": self.optimizer.state_dict(),
+                "sampler": self.sampler.state_dict(), "scheduler": self.scheduler.state_dict(),
+                "generator": self.generator.get_state(), "samples_seen": self.samples_seen, "rays_seen": self.rays_seen,
                 "samples_max": self.samples_max, "rays_skipped": self.rays_skipped}
 
-    def save(self, path: Path) -> None:
-        atomic_save_torch(self.state_dict(), path)
-
-    def load(self, path: Path) -> None:
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"checkpoint {path} does not exist")
-        st = torch.load(path, map_location=self.device, weights_only=False)
+    def load_state_dict(self, st: dict) -> None:
         try:
             self.field.load_state_dict(st["field"])
         except RuntimeError as e:
-            raise ValueError(f"checkpoint {path} was made with another field configuration "
-                             f"(encoder/field settings differ): {str(e).splitlines()[0]}") from None
+            raise ValueError("the checkpoint was made with another field configuration (encoder/field settings "
+                             f"differ): {str(e).splitlines()[0]}") from None
         self.optimizer.load_state_dict(st["optimizer"])
         self.sampler.load_state_dict(st.get("sampler", {}))
         self.scheduler.load_state_dict(st["scheduler"])
         self.generator.set_state(st["generator"].cpu() if self.device.type == "cpu" else st["generator"])
-        for k in ("iteration", "history", "train_seconds", "samples_seen", "rays_seen", "step_times", "samples_max",
-                  "rays_skipped"):
+        super().load_state_dict(st)
+        for k in ("samples_seen", "rays_seen", "samples_max", "rays_skipped"):
             setattr(self, k, st[k])
 
-    # --- loop ---
-    def fit(self, *, eval_every: int, checkpoint_every: int, checkpoint: Optional[Path] = None,
-            on_eval: Optional[Callable[[dict], None]] = None, on_step: Optional[Callable[[int, dict], None]] = None,
-            progress: bool = True) -> dict:
-        """Train to ``iterations``; evaluates every ``eval_every`` and at the end, checkpoints every
-        ``checkpoint_every`` (atomically) and on Ctrl-C. A NaN loss raises :class:`DivergenceError` and leaves
-        the last good checkpoint in place."""
-        from tqdm import tqdm
-
-        bar = tqdm(total=self.iterations, initial=self.iteration, disable=not progress, mininterval=2.0,
-                   desc="nerif", unit="it", dynamic_ncols=True)
-        last = self.history[-1] if self.history else {}
-        try:
-            while self.iteration < self.iterations:
-                terms = self.step()
-                bar.update(1)
-                if on_step is not None:
-                    on_step(self.iteration, terms)
-                done = self.iteration == self.iterations
-                if self.iteration % eval_every == 0 or done:
-                    last = self.evaluate()
-                    if on_eval is not None:
-                        on_eval(last)
-                    if "temperature_rmse_K" in last:
-                        bar.set_postfix(loss=f"{terms['loss']:.3g}", T_rmse=f"{last['temperature_rmse_K']:.1f}K")
-                if checkpoint is not None and (self.iteration % checkpoint_every == 0 or done):
-                    self.save(checkpoint)
-        except KeyboardInterrupt:
-            if checkpoint is not None:
-                self.save(checkpoint)
-                log.warning("interrupted at iteration %d; checkpoint saved to %s", self.iteration, checkpoint)
-            raise
-        finally:
-            bar.close()
-        return last
-
     def timing(self) -> dict:
-        steps = np.asarray(self.step_times) if self.step_times else np.zeros(1)
-        return {"iterations": self.iteration, "ms_per_iteration": float(np.median(steps) * 1e3),
-                "ms_per_iteration_mean": float(np.mean(steps) * 1e3),
-                "samples_per_second": self.samples_seen / max(self.train_seconds, 1e-9),
+        return {**super().timing(), "samples_per_second": self.samples_seen / max(self.train_seconds, 1e-9),
                 "samples_per_ray_mean": self.samples_seen / max(self.rays_seen, 1), "samples_per_ray_max": self.samples_max,
                 "rays_skipped_fraction": self.rays_skipped / max(self.rays_seen, 1)}

@@ -66,19 +66,51 @@ def test_multirun_writes_the_summary_table(tmp_path):
     assert md.count("\n") == 6 and "T RMSE [K]" in md
 
 
+def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
+    sweep = tmp_path / "sweep"
+    r = nerif("-m", *TINY, "train.iterations=6", "solver=nerif,cgls", f"hydra.sweep.dir={sweep}", cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    rows = list(csv.DictReader((sweep / "summary.csv").open()))
+    assert [row["config"].split(" ")[-1] for row in rows] == ["solver=nerif", "solver=cgls"]
+    jobs = sorted(p.parent for p in sweep.glob("*/metrics.json"))
+    assert len(jobs) == 2
+    for job in jobs:
+        m = json.loads((job / "metrics.json").read_text())
+        assert m["iterations"] == {"nerif": 6, "cgls": 200}[m["solver"]] and m["temperature_rmse_K"] > 0
+        assert (job / "slices.png").is_file() and (job / "reconstruction.npz").is_file()
+
+
 @pytest.mark.parametrize("override, message", [
     ("encoder=fourier", "Available options in 'encoder'"),
     ("train.rays_per_view=0", "rays per view must be at least 1"),
     ("sampler.samples_per_ray=1", "samples per ray K must be at least 2"),
     ("phantom.T_peak=0.5", "below 1 K"),
     ("loss.ambient_faces=[w]", "ambient faces"),
+    ("data.sensing=realistic data.sensor.noise_variance=-1", "noise variance must be >= 0"),
+    ("data.sensing=realistic pattern.name=stripes", "unknown background pattern 'stripes'"),
+    ("data.sensing=realistic data.sensor.image_binning=7", "image_binning=7 must divide or be a multiple"),
 ])
 def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
-    r = nerif(*TINY, override, f"hydra.run.dir={tmp_path}", cwd=ROOT)
+    r = nerif(*TINY, *override.split(), f"hydra.run.dir={tmp_path}", cwd=ROOT)
     assert r.returncode != 0
     assert message in r.stderr + r.stdout
     assert "Traceback" not in r.stderr
     assert not (tmp_path / "checkpoint.pt").exists()
+
+
+@pytest.mark.slow
+def test_a_realistic_run_writes_its_images_and_displacement_error(tmp_path):
+    r = nerif(*TINY, "data.sensing=realistic", "data.sensor.image_binning=8", "data.sensor.aperture_rays=8",
+              "data.sensor.noise_variance=1e-4", f"hydra.run.dir={tmp_path}", cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    assert 0 < m["displacement_rmse_px"] < 0.1 and m["circle_of_confusion_px"] > 1
+    for v in range(6):
+        for stem in ("reference_view", "distorted_view", "view"):
+            assert (tmp_path / "sensing" / f"{stem}{v:02d}.png").stat().st_size > 1000
+    import cv2
+    ref = cv2.imread(str(tmp_path / "sensing" / "reference_view00.png"), cv2.IMREAD_UNCHANGED)
+    assert ref.shape == (160, 90) and ref.dtype == np.uint8 and ref.std() > 30
 
 
 @pytest.mark.slow

@@ -69,3 +69,44 @@ def test_missing_file_and_ambiguous_archive(tmp_path):
     np.savez(tmp_path / "two.npz", a=np.ones((2, 2, 2)), b=np.ones((2, 2, 2)))
     with pytest.raises(ValueError, match="phantom.key"):
         PHANTOMS.build({"name": "file", "path": str(tmp_path / "two.npz"), "voxel_mm": 1, "T0": 296, "n0": 1.0003})
+
+
+def test_axisymmetric_flame_is_symmetric_about_the_axis_and_reads_a_profile_table(tmp_path):
+    from nerif.data.phantoms import lifted_jet_profile
+
+    ph = PHANTOMS.build({"name": "axisymmetric", "shape": [20, 50, 20], "voxel_mm": 2.0})
+    np.testing.assert_allclose(ph.T, ph.T.transpose(2, 1, 0), rtol=1e-12)  # x <-> z
+    np.testing.assert_allclose(ph.T, ph.T[::-1], rtol=1e-12)  # x -> -x
+    assert ph.T.max() > 1500 and ph.T[:, :3].max() < 400  # lifted: cold below the flame base
+    r, y = np.linspace(0, 40, 161), np.linspace(-40, 40, 161)
+    R, Y = np.meshgrid(r, y, indexing="ij")
+    np.savez(tmp_path / "profile.npz", r_mm=r, y_mm=y, T=lifted_jet_profile(R, Y, 296.15, 1800.0))
+    tab = PHANTOMS.build({"name": "axisymmetric", "shape": [20, 50, 20], "voxel_mm": 2.0,
+                          "profile": str(tmp_path / "profile.npz")})
+    inside = np.abs(ph.box.centres()[..., 1]) < 39  # the table covers |y| < 40 mm
+    assert np.abs(tab.T - ph.T)[inside].max() < 40  # linear interpolation of a 0.25 mm table
+    np.savez(tmp_path / "bad.npz", r_mm=r, y_mm=y, T=np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="T must be"):
+        PHANTOMS.build({"name": "axisymmetric", "profile": str(tmp_path / "bad.npz")})
+
+
+def test_turbulent_plume_is_seeded_clipped_and_has_a_minus_five_thirds_spectrum():
+    from nerif.data.phantoms import kolmogorov_field
+
+    a = PHANTOMS.build({"name": "turbulent_plume", "seed": 1})
+    b = PHANTOMS.build({"name": "turbulent_plume", "seed": 1})
+    c = PHANTOMS.build({"name": "turbulent_plume", "seed": 2})
+    np.testing.assert_array_equal(a.T, b.T)
+    assert np.abs(a.T - c.T).max() > 50
+    assert a.T.min() >= a.T0 and a.T.max() <= 2200.0
+    assert 0.05 < ((a.T - a.T0) > 1).mean() < 0.6  # a plume in ambient air, not a filled box
+    # shell-averaged energy spectrum E(k) ~ 4 pi k^2 |F(k)|^2 falls as k^(-5/3) below the largest scale
+    n, h = 64, 1.0
+    f = kolmogorov_field((n, n, n), h, 0, largest_mm=16.0)
+    P = np.abs(np.fft.fftn(f)) ** 2
+    k = np.sqrt(sum(g**2 for g in np.meshgrid(*[np.fft.fftfreq(n, h)] * 3, indexing="ij")))
+    bins = np.linspace(1 / 12, 0.4, 12)
+    kc = 0.5 * (bins[1:] + bins[:-1])
+    E = np.array([P[(k >= lo) & (k < hi)].mean() for lo, hi in zip(bins[:-1], bins[1:])]) * kc**2
+    slope = np.polyfit(np.log(kc), np.log(E), 1)[0]
+    assert abs(slope + 5 / 3) < 0.15, slope

@@ -40,3 +40,15 @@ def test_a_linear_field_deflects_by_gradient_times_chord_for_both_operators():
     expect = ((t1 - t0).clamp_min(0) * hit)[:, None] * g
     for name in ("auto", "discrete"):
         torch.testing.assert_close(eps[name], expect, rtol=1e-5, atol=1e-7)
+
+
+def test_perpendicular_part_is_what_a_camera_measures():
+    from nerif.renderers import perpendicular
+
+    g = torch.Generator().manual_seed(0)
+    d = torch.nn.functional.normalize(torch.randn(50, 3, generator=g, dtype=torch.float64), dim=-1)
+    eps = torch.randn(50, 3, generator=g, dtype=torch.float64)
+    p = perpendicular(eps, d)
+    torch.testing.assert_close((p * d).sum(-1), torch.zeros(50, dtype=torch.float64), atol=1e-15, rtol=0)
+    torch.testing.assert_close(perpendicular(p, d), p)  # a projection
+    torch.testing.assert_close(eps - p, (eps * d).sum(-1, keepdim=True) * d)

@@ -16,7 +16,7 @@ def test_synthetic_scene_keeps_only_rays_through_the_box_and_caches(tmp_path):
     assert scene.n_views == 3 and scene.view_start[-1] == len(scene.dirs) == len(scene.eps)
     o = scene.origins[scene.ray_views()]
     assert bool(scene.box.intersect(o, scene.dirs)[2].all())
-    assert len(list(tmp_path.glob("synthetic-*.pt"))) == 1
+    assert len(list(tmp_path.glob("synthetic-*.npz"))) == 1
     again = DATASETS.build({"name": "synthetic", "phantom": BLOB, "rig": RIG, "T_max": 2000.0,
                             "render_supersample": 2, "cache_dir": str(tmp_path)})
     torch.testing.assert_close(again.eps, scene.eps)
@@ -46,5 +46,49 @@ def test_supersampling_needs_a_phantom_with_a_grid(tmp_path):
 
 
 def test_unknown_sensing_is_refused():
-    with pytest.raises(ValueError, match="sensing"):
+    with pytest.raises(KeyError, match="magic.*ideal, perpendicular, realistic"):
         DATASETS.build({"name": "synthetic", "phantom": BLOB, "rig": RIG, "T_max": 2000.0, "sensing": "magic"})
+
+
+REALISTIC = {"name": "synthetic", "phantom": BLOB, "rig": dict(RIG, n_cameras=2), "T_max": 2000.0, "sensing": "realistic",
+             "sensor": {"aperture_rays": 8, "noise_variance": 1e-4, "image_binning": 8, "seed": 0,
+                        "pattern": {"name": "poisson_disk"}, "flow": {"name": "farneback"}}}
+
+
+def test_realistic_sensing_is_seeded_and_records_what_it_saw():
+    a = DATASETS.build(REALISTIC)
+    b = DATASETS.build(REALISTIC)
+    c = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], seed=1)))
+    torch.testing.assert_close(a.eps, b.eps)
+    assert not torch.equal(a.eps, c.eps)
+    rec = a.sensing
+    assert rec["reference"].shape == (2, 160, 90) and rec["reference"].dtype == np.uint8
+    assert rec["u_true"].shape == rec["u_est"].shape == (2, 32, 18, 2)
+    assert 0 < float(rec["displacement_rmse_px"]) < 0.1
+    # the observed deflections are the measurable part of the ideal ones, seen through a blurred, noisy flow
+    # estimate: close, not equal; and perpendicular to their rays, which the scene declares
+    from nerif.renderers import perpendicular
+
+    ideal = DATASETS.build(dict(REALISTIC, sensing="ideal"))
+    assert a.perpendicular_only and not ideal.perpendicular_only
+    target = perpendicular(ideal.eps, ideal.dirs)
+    assert torch.isfinite(a.eps).all() and 0 < float((a.eps - target).norm() / target.norm()) < 0.5
+    assert float((a.eps * a.dirs).sum(-1).abs().max()) < 1e-6 * float(a.eps.norm(dim=-1).max())
+
+
+def test_flow_failures_are_left_out_with_a_warning_never_propagated(monkeypatch, caplog):
+    from nerif.sensing.flow import FLOW
+
+    def half_nan(distorted, reference):
+        u = np.zeros(distorted.shape + (2,), np.float32)
+        u[: u.shape[0] // 2] = np.nan
+        return u
+
+    monkeypatch.setitem(FLOW._entries, "half_nan", half_nan)
+    with caplog.at_level("WARNING"):
+        s = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], flow={"name": "half_nan"})))
+    assert "not finite; those rays are left out" in caplog.text
+    assert torch.isfinite(s.eps).all() and 0 < len(s.eps) < 2 * 18 * 32
+    assert int(s.view_start[-1]) == len(s.dirs) == len(s.pixel)
+    rows = s.pixel // 18
+    assert bool((rows >= 16).all())  # only the lower half of each image, where the flow was finite

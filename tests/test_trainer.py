@@ -96,3 +96,18 @@ def test_a_small_reconstruction_cuts_the_error_well_under_half_of_the_ambient_fi
     ambient = rmse(np.full_like(tr.scene.truth_T, tr.scene.ambient.T0), tr.scene.truth_T)
     assert m["temperature_rmse_K"] < 0.4 * ambient, (m["temperature_rmse_K"], ambient)
     assert m["deflection_rmse"] < 0.2 * float(tr.scene.eps.norm(dim=-1).pow(2).mean().sqrt())
+
+
+def test_only_the_measured_part_is_compared_when_the_scene_says_so():
+    from dataclasses import replace
+
+    t = make_trainer()
+    for _ in range(5):
+        t.step()
+    idx = torch.arange(40)
+    full = t.predicted_deflections(idx, ("discrete",))["discrete"]
+    d = t.scene.dirs[idx]
+    assert float((full * d).sum(-1).abs().max()) > 1e-3 * float(full.norm(dim=-1).max())  # a field the box cuts
+    t.scene = replace(t.scene, perpendicular_only=True)
+    measured = t.predicted_deflections(idx, ("discrete",))["discrete"]
+    torch.testing.assert_close(measured, full - (full * d).sum(-1, keepdim=True) * d)

@@ -1,4 +1,5 @@
-"""Temperature phantoms on a probe box: analytic Phantom 5, a Gaussian blob, and volumes loaded from files.
+"""Temperature phantoms on a probe box: analytic Phantom 5, a Gaussian blob, an axisymmetric flame from an
+(r, y) profile, a turbulent plume, and volumes loaded from files.
 
 Each phantom builder returns a :class:`Phantom`: a temperature volume (nx, ny, nz) [K] on its probe box,
 with the ambient state that converts it to refractive index.
@@ -69,6 +70,81 @@ def gaussian_blob(shape: Sequence[int] = (48, 48, 48), voxel_mm: float = 1.0, ce
     d_peak = delta_from_n(n_from_temperature(T_peak, T0, n0), n0)
     T = temperature_from_n(n_from_delta(d_peak * np.exp(-r2 / (2 * width_mm**2)), n0), T0, n0)
     return Phantom(T, box, T0, n0, "gaussian_blob")
+
+
+def _cylinder_coordinates(box: ProbeBox) -> tuple[np.ndarray, np.ndarray]:
+    """Radius from the y axis and height [mm] at the voxel centres of ``box``."""
+    c = box.centres()
+    return np.hypot(c[..., 0], c[..., 2]), c[..., 1]
+
+
+def lifted_jet_profile(r: np.ndarray, y: np.ndarray, T0: float, T_peak: float, lift_mm: float = -30.0,
+                       base_radius_mm: float = 12.0, flame_length_mm: float = 55.0, thickness_mm: float = 4.0,
+                       spread: float = 0.08, base_mm: float = 3.0) -> np.ndarray:
+    """A lifted-jet-like flame T(r, y) [K]: a hot conical sheet that stabilises ``lift_mm`` high (over
+    ``base_mm``), closes ``flame_length_mm`` above it into a hot core, and thickens with height."""
+    h = y - lift_mm
+    r_f = base_radius_mm * np.clip(1 - h / flame_length_mm, 0, 1)
+    w = thickness_mm + spread * np.clip(h, 0, None)
+    onset = 0.5 * (1 + np.tanh(h / base_mm))
+    return T0 + (T_peak - T0) * onset * np.exp(-(((r - r_f) / w) ** 2))
+
+
+@PHANTOMS.register("axisymmetric")
+def axisymmetric(shape: Sequence[int] = (36, 50, 36), voxel_mm: float = 2.0, profile: Optional[str] = None,
+                 T_peak: float = 1800.0, T0: float = 296.15, n0: float = 1.00027, **lifted_jet) -> Phantom:
+    """An axisymmetric flame (axis y) from an (r, y) temperature profile: a stand-in for the paper's Phantom 1.
+
+    Args:
+        profile: a .npz with ``r_mm`` (R,), ``y_mm`` (Y,) and ``T`` (R, Y) [K], interpolated (ambient outside);
+            None = :func:`lifted_jet_profile` with ``T_peak`` and the ``lifted_jet`` parameters.
+    """
+    box = ProbeBox(tuple(shape), voxel_mm)
+    r, y = _cylinder_coordinates(box)
+    if profile is None:
+        T = lifted_jet_profile(r, y, T0, T_peak, **lifted_jet)
+    else:
+        from scipy.interpolate import RegularGridInterpolator
+
+        with np.load(Path(profile).expanduser()) as f:
+            r_ax, y_ax, table = f["r_mm"], f["y_mm"], f["T"]
+        if table.shape != (len(r_ax), len(y_ax)):
+            raise ValueError(f"{profile}: T must be (len(r_mm), len(y_mm)) = ({len(r_ax)}, {len(y_ax)}), "
+                             f"got {table.shape}")
+        interp = RegularGridInterpolator((r_ax, y_ax), table, bounds_error=False, fill_value=T0)
+        T = interp(np.stack([r, y], -1))
+    return Phantom(T, box, T0, n0, "axisymmetric")
+
+
+def kolmogorov_field(shape: Sequence[int], voxel_mm: float, seed: int, largest_mm: float) -> np.ndarray:
+    """A zero-mean, unit-variance random field whose energy spectrum falls as k^(-5/3) (amplitude k^(-11/6) in
+    3-D) below the scale ``largest_mm``; seeded."""
+    rng = np.random.default_rng(seed)
+    k = np.meshgrid(*[np.fft.fftfreq(n, voxel_mm) for n in shape[:2]], np.fft.rfftfreq(shape[2], voxel_mm),
+                    indexing="ij")
+    kk = np.sqrt(sum(ki**2 for ki in k))
+    amp = np.maximum(kk, 1.0 / largest_mm) ** (-11.0 / 6.0)
+    amp[0, 0, 0] = 0.0
+    noise = np.fft.rfftn(rng.standard_normal(tuple(shape)))
+    f = np.fft.irfftn(noise * amp, s=tuple(shape), axes=(0, 1, 2))
+    return (f - f.mean()) / f.std()
+
+
+@PHANTOMS.register("turbulent_plume")
+def turbulent_plume(shape: Sequence[int] = (36, 50, 36), voxel_mm: float = 2.0, T_peak: float = 1600.0,
+                    radius_mm: float = 8.0, spread: float = 0.06, fluctuation: float = 0.35, largest_mm: float = 20.0,
+                    T_min: Optional[float] = None, T_max: float = 2200.0, seed: int = 0, T0: float = 296.15,
+                    n0: float = 1.00027) -> Phantom:
+    """A turbulent plume: a smooth envelope (Gaussian in r cut at 5% of its peak, widening with height) times
+    ``1 + fluctuation * F`` with F a seeded -5/3-spectrum field; temperatures clipped to ``[T_min, T_max]``
+    (``T_min`` = T0)."""
+    box = ProbeBox(tuple(shape), voxel_mm)
+    r, y = _cylinder_coordinates(box)
+    R = radius_mm + spread * (y - y.min())
+    envelope = np.clip((np.exp(-0.5 * (r / R) ** 2) - 0.05) / 0.95, 0, None) * (radius_mm / R) ** 0.5
+    F = kolmogorov_field(box.shape, voxel_mm, seed, largest_mm)
+    T = T0 + (T_peak - T0) * envelope * (1 + fluctuation * F)
+    return Phantom(np.clip(T, T0 if T_min is None else T_min, T_max), box, T0, n0, "turbulent_plume")
 
 
 def gaussian_blob_deflection(origins: torch.Tensor, dirs: torch.Tensor, centre_mm, width_mm: float,

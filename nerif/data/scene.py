@@ -5,8 +5,6 @@ from one view is one slice and one random index, on any device.
 """
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -16,15 +14,42 @@ import numpy as np
 import torch
 
 from nerif.data.phantoms import PHANTOMS
-from nerif.export import atomic_save_torch
+from nerif.export import cached_arrays
 from nerif.geometry import Camera, ProbeBox, arc_rig
 from nerif.physics import Ambient
 from nerif.registry import Registry
+from nerif.renderers.deflection import perpendicular
 from nerif.renderers.voxel import voxel_deflection
+from nerif.sensing.flow import finite_or_masked
+from nerif.sensing.realistic import realistic
 
 log = logging.getLogger(__name__)
 DATASETS = Registry("dataset")
-_SCENE_CACHE_VERSION = 2
+SENSING = Registry("sensing")
+_SCENE_CACHE_VERSION = 5
+
+
+@SENSING.register("ideal")
+def ideal(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: torch.Tensor, pixel: torch.Tensor,
+          view_start: torch.Tensor, step_mm: Optional[float], rig_binning: int, cache_dir=None, **sensor):
+    """Thin chief rays, noise-free: the full deflection vectors, including the along-ray component that no
+    camera measures (the ``sensor`` parameters do not apply)."""
+    origins = torch.tensor(np.stack([c.position for c in cameras]), dtype=dirs.dtype, device=dirs.device)
+    o = origins[torch.repeat_interleave(torch.arange(len(cameras), device=dirs.device), view_start.diff())]
+    return voxel_deflection(delta, box, o, dirs, step_mm), None
+
+
+@SENSING.register("perpendicular")
+def ideal_perpendicular(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: torch.Tensor,
+                        pixel: torch.Tensor, view_start: torch.Tensor, step_mm: Optional[float], rig_binning: int,
+                        cache_dir=None, **sensor):
+    """Thin chief rays, noise-free, but only what a camera can measure: the part of each deflection
+    perpendicular to its ray (a perfect displacement measurement; realistic sensing without blur or noise)."""
+    eps, _ = ideal(delta, box, cameras, dirs, pixel, view_start, step_mm, rig_binning)
+    return perpendicular(eps, dirs), None
+
+
+SENSING.register("realistic")(realistic)
 
 
 @dataclass
@@ -41,6 +66,11 @@ class Scene:
         pixel: (N,) flat pixel index (row * width + column) of each ray in its camera.
         view_start: (V + 1,) offsets of each view's rays.
         truth_T: (nx, ny, nz) true temperature [K] on ``box`` where known (synthetic scenes), else None.
+        perpendicular_only: the observations are only the part of each deflection perpendicular to its ray, as
+            measured through image displacements (their along-ray component is zero and means nothing); solvers
+            then compare only that part. False for ideal sensing (full vectors).
+        sensing: what realistic sensing produced (images, true and estimated displacements; see
+            :func:`nerif.sensing.realistic.realistic`), else None.
     """
 
     box: ProbeBox
@@ -52,6 +82,8 @@ class Scene:
     pixel: torch.Tensor
     view_start: torch.Tensor
     truth_T: Optional[np.ndarray] = None
+    sensing: Optional[dict] = None
+    perpendicular_only: bool = False
 
     @property
     def n_views(self) -> int:
@@ -95,10 +127,6 @@ def rays_in_box(box: ProbeBox, cameras: list[Camera], device="cpu"):
     return origins, torch.cat(dirs), torch.cat(pixels), torch.tensor(starts, device=device)
 
 
-def _cache_key(payload: dict) -> str:
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-
 def supersampled(phantom: dict, factor: int):
     """The same phantom on a grid ``factor`` times finer (same box); needs a phantom built from shape and voxel."""
     if "shape" not in phantom or "voxel_mm" not in phantom:
@@ -107,39 +135,52 @@ def supersampled(phantom: dict, factor: int):
     return PHANTOMS.build(fine)
 
 
+def keep_rays(dirs, eps, pixel, view_start, keep: torch.Tensor):
+    """The rays where ``keep`` (N,) is True, with the view offsets recomputed."""
+    views = torch.repeat_interleave(torch.arange(len(view_start) - 1, device=dirs.device), view_start.diff())
+    counts = torch.bincount(views[keep], minlength=len(view_start) - 1)
+    starts = torch.cat([counts.new_zeros(1), counts.cumsum(0)])
+    return dirs[keep], eps[keep], pixel[keep], starts
+
+
 @DATASETS.register("synthetic")
-def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", render_supersample: int = 1,
-              render_step_mm: Optional[float] = None, cache_dir: Optional[str] = None, device: str = "cpu") -> Scene:
+def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", sensor: Optional[dict] = None,
+              render_supersample: int = 1, render_step_mm: Optional[float] = None, cache_dir: Optional[str] = None,
+              device: str = "cpu") -> Scene:
     """A phantom seen by a synthetic rig; observations from the voxel forward model.
 
     Args:
         phantom: phantom config (``name`` + parameters). rig: :func:`nerif.geometry.arc_rig` parameters.
         T_max: hottest expected temperature [K] (sets delta_thre).
-        sensing: ``ideal`` = thin rays, noise-free.
+        sensing: ``ideal`` (thin rays, noise-free deflections) or ``realistic`` (finite aperture, background
+            pattern, noise, optical flow: :func:`nerif.sensing.realistic.realistic` with the ``sensor`` parameters).
         render_supersample: the observations are rendered from the phantom on a grid this many times finer
             (a coarse voxel forward model misses the deflections of a continuous field: 9% on Phantom 5 at
             2 mm, 0.7% at 0.5 mm); the reconstruction is evaluated on the phantom's own grid.
         render_step_mm: quadrature step of the observations (default half a rendering voxel).
         cache_dir: where observations are cached, keyed by the config that made them (None: no cache).
     """
-    if sensing != "ideal":
-        raise ValueError(f"data.sensing='{sensing}' is not available; this version renders 'ideal' observations")
+    sense = SENSING.get(sensing)
+    sensor = dict(sensor or {}) if sensing != "ideal" else {}
     ph = PHANTOMS.build(phantom)
     ambient = Ambient(ph.T0, ph.n0, float(T_max))
     cameras = arc_rig(**rig)
     origins, dirs, pixel, view_start = rays_in_box(ph.box, cameras, device)
 
-    key = _cache_key({"v": _SCENE_CACHE_VERSION, "phantom": phantom, "rig": rig, "step": render_step_mm,
-                      "supersample": render_supersample})
-    path = Path(cache_dir).expanduser() / f"synthetic-{key}.pt" if cache_dir else None
-    if path is not None and path.is_file():
-        eps = torch.load(path, map_location=device)["eps"]
-        log.info("observations from cache %s", path)
-    else:
+    def observe() -> dict:
         fine = supersampled(phantom, render_supersample) if render_supersample > 1 else ph
         delta = torch.as_tensor(fine.delta, dtype=torch.float32, device=device)
-        o = origins[torch.repeat_interleave(torch.arange(len(cameras), device=device), view_start.diff())]
-        eps = voxel_deflection(delta, fine.box, o, dirs, render_step_mm)
-        if path is not None:
-            atomic_save_torch({"eps": eps.cpu()}, path)
-    return Scene(ph.box, ambient, cameras, origins, dirs, eps.to(device), pixel, view_start, ph.T)
+        eps, record = sense(delta, fine.box, cameras, dirs, pixel, view_start, render_step_mm,
+                            int(rig.get("binning", 1)), cache_dir=cache_dir, **sensor)
+        return {"eps": eps.cpu().numpy(), **{f"sensing/{k}": v for k, v in (record or {}).items()}}
+
+    payload = {"v": _SCENE_CACHE_VERSION, "phantom": phantom, "rig": rig, "step": render_step_mm,
+               "supersample": render_supersample, "sensing": sensing, "sensor": sensor}
+    arrays = cached_arrays(cache_dir, "synthetic", payload, observe)
+    eps = torch.as_tensor(arrays["eps"], device=device)
+    record = {k[len("sensing/"):]: v for k, v in arrays.items() if k.startswith("sensing/")} or None
+    keep = torch.as_tensor(finite_or_masked(eps.cpu().numpy(), f"{sensing} sensing"), device=device)
+    if not keep.all():
+        dirs, eps, pixel, view_start = keep_rays(dirs, eps, pixel, view_start, keep)
+    return Scene(ph.box, ambient, cameras, origins, dirs, eps.to(device), pixel, view_start, ph.T, record,
+                 perpendicular_only=sensing != "ideal")  # every sensing but ideal goes through image displacements

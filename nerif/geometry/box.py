@@ -92,6 +92,15 @@ class ProbeBox:
         return t_near, t_far, t_far > t_near + 1e-9
 
 
+def face_axes(faces) -> list[int]:
+    """Axis names of box faces (``x``, ``y``, ``z``: both faces of that axis) -> axis indices."""
+    axes = {"x": 0, "y": 1, "z": 2}
+    unknown = [f for f in faces if f not in axes]
+    if unknown:
+        raise ValueError(f"ambient faces must be among x, y, z; got {unknown}")
+    return [axes[f] for f in faces]
+
+
 def sample_volume(volume: torch.Tensor, box: ProbeBox, p: torch.Tensor, padding: str = "zeros") -> torch.Tensor:
     """Trilinear interpolation of a voxel volume at world points. Between the outermost voxel centres and the
     faces, and beyond, ``padding='zeros'`` blends towards zero and ``'border'`` holds the edge values.

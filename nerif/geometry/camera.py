@@ -48,6 +48,10 @@ class Camera:
             raise ValueError(f"binning {factor} must divide the sensor size {self.width} x {self.height} px")
         return replace(self, pitch_mm=self.pitch_mm * factor, width=self.width // factor, height=self.height // factor)
 
+    def unbinned(self, factor: int) -> "Camera":
+        """The full sensor of a camera read out with ``factor x factor`` binning (inverse of :meth:`binned`)."""
+        return replace(self, pitch_mm=self.pitch_mm / factor, width=self.width * factor, height=self.height * factor)
+
     def pixel_directions(self, dtype=torch.float64) -> torch.Tensor:
         """Unit ray directions through every pixel centre, (height * width, 3), row-major (row j, column i)."""
         j, i = torch.meshgrid(torch.arange(self.height, dtype=dtype), torch.arange(self.width, dtype=dtype), indexing="ij")

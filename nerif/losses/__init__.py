@@ -5,9 +5,8 @@ from typing import Mapping, Optional, Sequence
 
 import torch
 
-from nerif.geometry import ProbeBox
+from nerif.geometry import ProbeBox, face_axes
 
-_AXES = {"x": 0, "y": 1, "z": 2}
 
 
 def deflection_terms(eps: Mapping[str, torch.Tensor], eps_obs: torch.Tensor) -> dict:
@@ -44,17 +43,14 @@ class AmbientBoundary:
 
     Args:
         box: the probe box.
-        faces: axes whose two faces are ambient, e.g. ``("x", "z")``, the lateral faces of a flame
+        faces: axes whose two faces are ambient, e.g. ``("x", "z")`` for the lateral faces of a flame
             burning along y. Empty: no condition.
         weight: loss weight (normalised units, beside the deflection MSE).
         points: face points per iteration.
     """
 
-    def __init__(self, box: ProbeBox, faces: Sequence[str] = ("x", "z"), weight: float = 0.05, points: int = 256):
-        unknown = [f for f in faces if f not in _AXES]
-        if unknown:
-            raise ValueError(f"ambient faces must be among x, y, z; got {unknown}")
-        self.box, self.axes, self.weight, self.points = box, [_AXES[f] for f in faces], float(weight), int(points)
+    def __init__(self, box: ProbeBox, faces: Sequence[str] = ("x",), weight: float = 0.05, points: int = 256):
+        self.box, self.axes, self.weight, self.points = box, face_axes(faces), float(weight), int(points)
 
     @property
     def active(self) -> bool:

@@ -1,7 +1,7 @@
 """Deflection rendering: ``eps = sum_i grad(sigma)(p_i) dt_i`` along each ray (paraxial, straight rays)."""
 from __future__ import annotations
 
-from typing import Mapping
+from typing import Mapping, Optional
 
 import torch
 
@@ -15,7 +15,17 @@ def integrate(values: torch.Tensor, samples: Samples) -> torch.Tensor:
     return out.index_add(0, samples.ray_index, values * samples.dt[:, None].to(values.dtype))
 
 
-def render_deflections(field, samples: Samples, operators: Mapping[str, bool], step_mm: float) -> dict:
+def perpendicular(eps: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
+    """The part of deflections (R, 3) perpendicular to their rays (R, 3): what a BOS camera can measure.
+
+    The component along a straight ray integrates to sigma(exit) - sigma(entry): zero for a field that is
+    ambient on the box faces, but not for one cut by the box (Phantom 5 is hot on its y and z faces), and no
+    background displacement shows it."""
+    return eps - (eps * dirs).sum(-1, keepdim=True) * dirs
+
+
+def render_deflections(field, samples: Samples, operators: Mapping[str, bool], step_mm: float,
+                       dirs: Optional[torch.Tensor] = None) -> dict:
     """Deflections of the field along packed samples for each named gradient operator.
 
     Args:
@@ -23,6 +33,7 @@ def render_deflections(field, samples: Samples, operators: Mapping[str, bool], s
         operators: operator name -> whether a loss is trained on it (builds the graph it needs:
             second-order for ``auto``); an untrained operator is evaluated without any parameter graph.
         step_mm: central-difference step for ``discrete``.
+        dirs: (n_rays, 3) ray directions: when given, only the measurable part :func:`perpendicular` to them.
     Returns:
         name -> (n_rays, 3) deflection of sigma (dimensionless; multiply by delta_thre for radians).
     """
@@ -34,5 +45,6 @@ def render_deflections(field, samples: Samples, operators: Mapping[str, bool], s
             g = op(field, pos, create_graph=True, step_mm=step_mm)
         else:
             g = op(field, pos, create_graph=False, step_mm=step_mm).detach()
-        out[name] = integrate(g, samples)
+        eps = integrate(g, samples)
+        out[name] = eps if dirs is None else perpendicular(eps, dirs.to(eps.dtype))
     return out

@@ -1,0 +1,124 @@
+"""Voxel CGLS as a solver interchangeable with the neural one: same scene, masks, metrics, loop and outputs."""
+from __future__ import annotations
+
+import hashlib
+import time
+from typing import Optional
+
+import numpy as np
+import torch
+
+from nerif.baselines.cgls import CGLS
+from nerif.baselines.projector import PROJECTORS, SparseProjector
+from nerif.geometry import face_axes
+from nerif.loop import IterativeSolver
+from nerif.renderers.deflection import perpendicular
+
+def boundary_mask(shape, faces) -> np.ndarray:
+    """(nx, ny, nz) bool, False on the given faces of the grid (``x``, ``y``, ``z``: both faces of that axis)."""
+    keep = np.ones(shape, bool)
+    for axis in face_axes(faces):
+        idx = [slice(None)] * 3
+        for end in (0, -1):
+            idx[axis] = end
+            keep[tuple(idx)] = False
+    return keep
+
+
+_LAST_PROJECTOR: dict = {}
+
+
+def built_projector(name: str, box, origins: torch.Tensor, dirs: torch.Tensor, step_mm, chunk: int):
+    """The projector for these rays, reusing the last one built in this process when the rays and grid are the
+    same (sweeps and benchmarks run many solvers on one scene; a sparse matrix takes seconds to build)."""
+    digest = hashlib.sha256(origins.cpu().numpy().tobytes() + dirs.cpu().numpy().tobytes()).hexdigest()
+    key = (name, box, step_mm, chunk, str(dirs.dtype), str(dirs.device), digest)
+    if _LAST_PROJECTOR.get("key") != key:
+        _LAST_PROJECTOR.clear()  # one at a time: bounded memory
+        _LAST_PROJECTOR.update(key=key, projector=PROJECTORS.build(
+            {"name": name}, box=box, origins=origins, dirs=dirs, step_mm=step_mm, chunk=chunk))
+    return _LAST_PROJECTOR["projector"]
+
+
+class CGLSSolver(IterativeSolver):
+    """CGLS on every ray of the scene for sigma on the probe grid.
+
+    The deflections fix sigma up to a constant; as the neural solver's ambient boundary condition does, the
+    voxels of ``ambient_faces`` are held at sigma = 0 (ambient gas), which removes that null space. A 3-D mask
+    restricts the unknowns further.
+
+    Args:
+        scene: rays and observations. iterations: CGLS iterations (upper bound).
+        regularizer, lam, reweight_every, tv_eps: see :class:`nerif.baselines.cgls.CGLS`.
+        tol: stop once |b - A x| / |b| falls below it (discrepancy principle; None: run all iterations).
+        mask_volume: (nx, ny, nz) 3-D mask, > 0.5 = unknown (None: every voxel).
+        projector: ``sparse``, ``matrix_free`` or ``auto`` (sparse when its matrix fits in ``max_matrix_gib``).
+        step_mm, chunk: projector quadrature step and rays per batch.
+    """
+
+    name = "cgls"
+
+    def __init__(self, scene, *, iterations: int, regularizer: str = "none", lam: float = 0.0,
+                 tol: Optional[float] = None, reweight_every: int = 20, tv_eps: float = 1e-3,
+                 ambient_faces=("x",), mask_volume: Optional[np.ndarray] = None, projector: str = "auto",
+                 max_matrix_gib: float = 4.0, step_mm: Optional[float] = None, chunk: int = 1 << 14,
+                 dtype: str = "float32", flame_threshold_K: float = 1.0):
+        super().__init__(scene, iterations, flame_threshold_K)
+        dt = getattr(torch, dtype)
+        self.scale = scene.ambient.delta_thre
+        origins = scene.origins[scene.ray_views()].to(dt)
+        if projector == "auto":
+            fits = SparseProjector.memory_bytes(scene.box, len(origins), step_mm) <= max_matrix_gib * 2**30
+            projector = "sparse" if fits else "matrix_free"
+        self.projector = built_projector(projector, scene.box, origins, scene.dirs.to(dt), step_mm, chunk)
+        self.projector_name = projector
+        unknown = boundary_mask(scene.box.shape, ambient_faces)
+        if mask_volume is not None:
+            unknown &= np.asarray(mask_volume) > 0.5
+        if not unknown.any():
+            raise ValueError("CGLS has no unknowns: the 3-D mask is empty inside the ambient faces")
+        self.unknowns = int(unknown.sum())
+        mask = torch.as_tensor(unknown, dtype=dt, device=self.device)
+        b = (scene.eps / self.scale).to(dt)
+        self.tol = tol
+        d = scene.dirs.to(dt)
+        P = (lambda e: perpendicular(e, d)) if scene.perpendicular_only else (lambda e: e)  # symmetric: (P A)^T = A^T P
+
+        def Ax(x):
+            return P(self.projector.Ax(x))
+
+        def Atb(y):
+            return self.projector.Atb(P(y))
+
+        self.cgls = CGLS(Ax, Atb, b, scene.box.shape, regularizer=regularizer, lam=lam,
+                         mask=mask, reweight_every=reweight_every, tv_eps=tv_eps)
+
+    def step(self) -> dict:
+        t0 = time.perf_counter()
+        res = self.cgls.step()
+        if self.device.type == "cuda":
+            torch.cuda.synchronize()
+        self._timed(time.perf_counter() - t0)
+        return {"loss": res**2, "relative_residual": res, "converged": self.tol is not None and res < self.tol}
+
+    def reconstruction(self) -> np.ndarray:
+        return self.cgls.solution().cpu().numpy().astype(np.float64)
+
+    def evaluate(self) -> dict:
+        r = self.cgls.r * self.scale  # data residual [rad]
+        m = {"iteration": self.iteration, "wall_time_s": self.train_seconds, **self.field_errors(self.reconstruction()),
+             "deflection_rmse": float((r.double() ** 2).sum(-1).mean().sqrt()),
+             "relative_residual": self.cgls.residual()}
+        self.history.append(m)
+        return m
+
+    def state_dict(self) -> dict:
+        return {**super().state_dict(), "cgls": self.cgls.state_dict()}
+
+    def load_state_dict(self, st: dict) -> None:
+        super().load_state_dict(st)
+        self.cgls.load_state_dict(st["cgls"])
+
+    def timing(self) -> dict:
+        return {**super().timing(), "unknowns": self.unknowns, "rays": len(self.scene.dirs),
+                "projector": self.projector_name}

@@ -1,0 +1,54 @@
+"""Displacement estimation between a distorted and a reference BOS image (OpenCV optical flow).
+
+Every estimator is ``fn(distorted, reference, **params) -> (H, W, 2) float32 [px]`` (column, row) with
+``distorted(x) ~ reference(x + u(x))``, the convention of :mod:`nerif.sensing.imaging`, registered in
+:data:`FLOW`.
+"""
+from __future__ import annotations
+
+import logging
+
+import cv2
+import numpy as np
+
+from nerif.registry import Registry
+
+FLOW = Registry("optical flow")
+log = logging.getLogger(__name__)
+
+
+def _to_uint8(image: np.ndarray) -> np.ndarray:
+    return np.clip(np.rint(image * 255.0), 0, 255).astype(np.uint8)
+
+
+@FLOW.register("farneback")
+def farneback(distorted: np.ndarray, reference: np.ndarray, pyr_scale: float = 0.5, levels: int = 5,
+              winsize: int = 7, iterations: int = 5, poly_n: int = 5, poly_sigma: float = 1.1) -> np.ndarray:
+    """Farneback's polynomial-expansion flow (defaults: the paper's parameters), on float32 images scaled to
+    0-255 (its thresholds assume 8-bit intensities: on [0, 1] images it returns ~zero flow)."""
+    return cv2.calcOpticalFlowFarneback(np.float32(distorted) * 255, np.float32(reference) * 255, None,
+                                        pyr_scale, levels, winsize, iterations, poly_n, poly_sigma, 0)
+
+
+@FLOW.register("dis")
+def dis(distorted: np.ndarray, reference: np.ndarray, preset: str = "medium", patch_size: int = 8,
+        patch_stride: int = 3, refinement_iterations: int = 5) -> np.ndarray:
+    """Dense inverse search (Kroeger et al. 2016) with variational refinement, on 8-bit images."""
+    presets = {"ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST, "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
+               "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM}
+    if preset not in presets:
+        raise ValueError(f"DIS preset '{preset}' unknown; choose one of: {', '.join(presets)}")
+    est = cv2.DISOpticalFlow_create(presets[preset])
+    est.setPatchSize(patch_size)
+    est.setPatchStride(patch_stride)
+    est.setVariationalRefinementIterations(refinement_iterations)
+    return est.calc(_to_uint8(distorted), _to_uint8(reference), None)
+
+
+def finite_or_masked(u: np.ndarray, what: str) -> np.ndarray:
+    """(..., 2) displacements -> (...) bool, False where a component is NaN or infinite (with a warning)."""
+    ok = np.isfinite(u).all(-1)
+    bad = int(ok.size - ok.sum())
+    if bad:
+        log.warning("%s: %d of %d displacement estimates are not finite; those rays are left out", what, bad, ok.size)
+    return ok

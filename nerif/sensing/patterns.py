@@ -1,0 +1,88 @@
+"""Background patterns for BOS, rendered at sensor resolution.
+
+Every pattern is ``fn(height, width, seed, **params) -> (height, width) float32`` with intensities in
+[0, 1], registered in :data:`PATTERNS` and reproducible under its seed. Lengths are in pixels of the
+image the pattern is rendered for.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from nerif.registry import Registry
+
+PATTERNS = Registry("background pattern")
+
+
+def poisson_disk_points(height: int, width: int, spacing_px: float, rng: np.random.Generator,
+                        rounds: int = 15) -> np.ndarray:
+    """Points no closer than ``spacing_px`` to each other, filling the image (maximal Poisson-disk set).
+
+    Parallel dart throwing on a grid of cells of side ``spacing / sqrt(2)`` (one point per cell at most):
+    each round proposes a point in every empty cell of one of 9 phases (cells 3 apart cannot conflict) and
+    keeps those farther than ``spacing`` from every point in the 5 x 5 cells around.
+    Returns: (P, 2) points as (row, column) [px].
+    """
+    s = spacing_px / np.sqrt(2.0)
+    ny, nx = int(np.ceil(height / s)), int(np.ceil(width / s))
+    pts = np.full((ny + 4, nx + 4, 2), np.nan)  # padded by 2 cells on every side
+    for _ in range(rounds):
+        for pi in range(3):
+            for pj in range(3):
+                cy, cx = np.meshgrid(np.arange(pi, ny, 3), np.arange(pj, nx, 3), indexing="ij")
+                empty = np.isnan(pts[cy + 2, cx + 2, 0])
+                cy, cx = cy[empty], cx[empty]
+                if not len(cy):
+                    continue
+                cand = np.stack([(cy + rng.random(len(cy))) * s, (cx + rng.random(len(cx))) * s], -1)
+                ok = (cand[:, 0] < height) & (cand[:, 1] < width)
+                for dy in range(-2, 3):
+                    for dx in range(-2, 3):
+                        nb = pts[cy + 2 + dy, cx + 2 + dx]
+                        d2 = ((nb - cand) ** 2).sum(-1)
+                        ok &= ~(d2 < spacing_px**2)  # NaN neighbours compare False
+                pts[cy[ok] + 2, cx[ok] + 2] = cand[ok]
+    p = pts[2:-2, 2:-2].reshape(-1, 2)
+    return p[~np.isnan(p[:, 0])]
+
+
+def render_dots(height: int, width: int, points: np.ndarray, radius_px: float, supersample: int = 4) -> np.ndarray:
+    """Anti-aliased white discs of ``radius_px`` on black at ``points`` (row, column) [px] -> (H, W) float32."""
+    k = supersample
+    canvas = np.zeros((height * k, width * k), np.uint8)
+    shift = 4  # sub-pixel precision of cv2.circle: 2^-4 px
+    centres = np.round((points * k + (k - 1) / 2) * (1 << shift)).astype(np.int64)
+    r = int(round(radius_px * k * (1 << shift)))
+    for y, x in centres:
+        cv2.circle(canvas, (int(x), int(y)), r, 255, -1, lineType=cv2.LINE_8, shift=shift)
+    return cv2.resize(canvas.astype(np.float32) / 255.0, (width, height), interpolation=cv2.INTER_AREA)
+
+
+@PATTERNS.register("poisson_disk")
+def poisson_disk(height: int, width: int, seed: int = 0, spacing_px: float = 4.0, radius_px: float = 1.2) -> np.ndarray:
+    """Dots of ``radius_px`` at Poisson-disk positions (no two closer than ``spacing_px``): the paper's pattern."""
+    rng = np.random.default_rng(seed)
+    return render_dots(height, width, poisson_disk_points(height, width, spacing_px, rng), radius_px)
+
+
+@PATTERNS.register("random_dots")
+def random_dots(height: int, width: int, seed: int = 0, density: float = 0.06, radius_px: float = 1.2) -> np.ndarray:
+    """Dots of ``radius_px`` at uniformly random positions, ``density`` dots per pixel (overlaps allowed)."""
+    rng = np.random.default_rng(seed)
+    n = int(round(density * height * width))
+    return render_dots(height, width, rng.random((n, 2)) * [height, width], radius_px)
+
+
+@PATTERNS.register("wavelet_noise")
+def wavelet_noise(height: int, width: int, seed: int = 0, scale_px: float = 2.0) -> np.ndarray:
+    """Band-limited noise (Cook & DeRose wavelet noise): white noise minus its low-pass, at a feature size of
+    about ``scale_px``; normalised to [0, 1] (1st-99th percentiles)."""
+    rng = np.random.default_rng(seed)
+    h, w = int(np.ceil(height / scale_px)) + 2, int(np.ceil(width / scale_px)) + 2
+    h, w = h + h % 2, w + w % 2
+    r = rng.standard_normal((h, w)).astype(np.float32)
+    low = cv2.resize(cv2.resize(r, (w // 2, h // 2), interpolation=cv2.INTER_AREA), (w, h), interpolation=cv2.INTER_LINEAR)
+    band = cv2.resize(r - low, (int(round(w * scale_px)), int(round(h * scale_px))), interpolation=cv2.INTER_CUBIC)
+    band = band[:height, :width]
+    lo, hi = np.percentile(band, [1, 99])
+    return np.clip((band - lo) / (hi - lo), 0, 1).astype(np.float32)

@@ -1,0 +1,37 @@
+import torch
+
+from nerif.sensing.imaging import add_noise, diffraction_blur, warp
+
+
+def _image():
+    g = torch.Generator().manual_seed(0)
+    return diffraction_blur(torch.rand(40, 50, generator=g, dtype=torch.float64), 4.0)
+
+
+def test_warp_by_zero_is_identity_and_by_whole_pixels_is_a_shift():
+    img = _image()
+    torch.testing.assert_close(warp(img, torch.zeros(40, 50, 2, dtype=torch.float64)), img)
+    u = torch.zeros(40, 50, 2, dtype=torch.float64)
+    u[..., 0], u[..., 1] = 2.0, -1.0  # pixel (r, c) shows the background at (r - 1, c + 2)
+    torch.testing.assert_close(warp(img, u)[1:, :-2], img[:-1, 2:])
+
+
+def test_warp_is_differentiable_in_the_displacements():
+    img = _image()[:8, :9]
+    u = (0.3 * torch.rand(8, 9, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(1))).requires_grad_()
+    assert torch.autograd.gradcheck(lambda v: warp(img, v), (u,))
+
+
+def test_noise_is_reproducible_and_has_its_variance():
+    img = torch.zeros(200, 200)
+    a = add_noise(img, 1e-3, torch.Generator().manual_seed(5))
+    b = add_noise(img, 1e-3, torch.Generator().manual_seed(5))
+    torch.testing.assert_close(a, b)
+    assert abs(float(a.var()) / 1e-3 - 1) < 0.05
+    assert add_noise(img, 0.0) is img
+
+
+def test_diffraction_blur_keeps_the_mean_and_lowers_the_contrast():
+    img = _image()
+    b = diffraction_blur(img, 6.0)
+    assert abs(float(b.mean() - img.mean())) < 1e-3 and b.std() < img.std()
