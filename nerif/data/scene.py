@@ -152,8 +152,9 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
     Args:
         phantom: phantom config (``name`` + parameters). rig: :func:`nerif.geometry.arc_rig` parameters.
         T_max: hottest expected temperature [K] (sets delta_thre).
-        sensing: ``ideal`` (thin rays, noise-free deflections) or ``realistic`` (finite aperture, background
-            pattern, noise, optical flow: :func:`nerif.sensing.realistic.realistic` with the ``sensor`` parameters).
+        sensing: a :data:`SENSING` entry: ``ideal`` (thin rays, noise-free deflection vectors), ``perpendicular``
+            (the same, only the part a camera measures) or ``realistic`` (finite aperture, background pattern,
+            noise, optical flow: :func:`nerif.sensing.realistic.realistic` with the ``sensor`` parameters).
         render_supersample: the observations are rendered from the phantom on a grid this many times finer
             (a coarse voxel forward model misses the deflections of a continuous field: 9% on Phantom 5 at
             2 mm, 0.7% at 0.5 mm); the reconstruction is evaluated on the phantom's own grid.
@@ -161,7 +162,7 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
         cache_dir: where observations are cached, keyed by the config that made them (None: no cache).
     """
     sense = SENSING.get(sensing)
-    sensor = dict(sensor or {}) if sensing != "ideal" else {}
+    sensor = dict(sensor or {}) if sensing == "realistic" else {}  # the only sensing with parameters
     ph = PHANTOMS.build(phantom)
     ambient = Ambient(ph.T0, ph.n0, float(T_max))
     cameras = arc_rig(**rig)
