@@ -29,13 +29,18 @@ SENSING = Registry("sensing")
 _SCENE_CACHE_VERSION = 5
 
 
+def view_index(view_start: torch.Tensor) -> torch.Tensor:
+    """(V + 1,) view offsets -> (N,) view of every ray."""
+    return torch.repeat_interleave(torch.arange(len(view_start) - 1, device=view_start.device), view_start.diff())
+
+
 @SENSING.register("ideal")
 def ideal(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: torch.Tensor, pixel: torch.Tensor,
           view_start: torch.Tensor, step_mm: Optional[float], rig_binning: int, cache_dir=None, **sensor):
     """Thin chief rays, noise-free: the full deflection vectors, including the along-ray component that no
     camera measures (the ``sensor`` parameters do not apply)."""
     origins = torch.tensor(np.stack([c.position for c in cameras]), dtype=dirs.dtype, device=dirs.device)
-    o = origins[torch.repeat_interleave(torch.arange(len(cameras), device=dirs.device), view_start.diff())]
+    o = origins[view_index(view_start.to(dirs.device))]
     return voxel_deflection(delta, box, o, dirs, step_mm), None
 
 
@@ -98,7 +103,7 @@ class Scene:
 
     def ray_views(self) -> torch.Tensor:
         """(N,) view index of every ray."""
-        return torch.repeat_interleave(torch.arange(self.n_views, device=self.dirs.device), self.view_counts())
+        return view_index(self.view_start)
 
     def to(self, device) -> "Scene":
         return replace(self, origins=self.origins.to(device), dirs=self.dirs.to(device), eps=self.eps.to(device),
@@ -137,8 +142,7 @@ def supersampled(phantom: dict, factor: int):
 
 def keep_rays(dirs, eps, pixel, view_start, keep: torch.Tensor):
     """The rays where ``keep`` (N,) is True, with the view offsets recomputed."""
-    views = torch.repeat_interleave(torch.arange(len(view_start) - 1, device=dirs.device), view_start.diff())
-    counts = torch.bincount(views[keep], minlength=len(view_start) - 1)
+    counts = torch.bincount(view_index(view_start)[keep], minlength=len(view_start) - 1)
     starts = torch.cat([counts.new_zeros(1), counts.cumsum(0)])
     return dirs[keep], eps[keep], pixel[keep], starts
 

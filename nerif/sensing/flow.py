@@ -12,13 +12,10 @@ import cv2
 import numpy as np
 
 from nerif.registry import Registry
+from nerif.sensing.imaging import to_uint8
 
 FLOW = Registry("optical flow")
 log = logging.getLogger(__name__)
-
-
-def _to_uint8(image: np.ndarray) -> np.ndarray:
-    return np.clip(np.rint(image * 255.0), 0, 255).astype(np.uint8)
 
 
 @FLOW.register("farneback")
@@ -42,7 +39,7 @@ def dis(distorted: np.ndarray, reference: np.ndarray, preset: str = "medium", pa
     est.setPatchSize(patch_size)
     est.setPatchStride(patch_stride)
     est.setVariationalRefinementIterations(refinement_iterations)
-    return est.calc(_to_uint8(distorted), _to_uint8(reference), None)
+    return est.calc(to_uint8(distorted), to_uint8(reference), None)
 
 
 def finite_or_masked(u: np.ndarray, what: str) -> np.ndarray:

@@ -26,7 +26,7 @@ from nerif.geometry import Camera, ProbeBox
 from nerif.renderers.voxel import voxel_deflection
 from nerif.sensing.displacement import deflection_to_displacement, displacement_to_deflection
 from nerif.sensing.flow import FLOW
-from nerif.sensing.imaging import add_noise, diffraction_blur, warp
+from nerif.sensing.imaging import add_noise, diffraction_blur, to_uint8, warp
 from nerif.sensing.optics import aperture_points, aperture_rays, circle_of_confusion
 from nerif.sensing.patterns import PATTERNS
 
@@ -130,8 +130,8 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         err = (u_est_t.reshape(-1, 2)[pix] - u_true_t.reshape(-1, 2)[pix]) ** 2
         err = err[np.isfinite(err).all(-1)]
         sq_err, count = sq_err + float(err.sum()), count + len(err)
-        rec["reference"].append(np.clip(np.rint(reference * 255), 0, 255).astype(np.uint8))
-        rec["distorted"].append(np.clip(np.rint(distorted * 255), 0, 255).astype(np.uint8))
+        rec["reference"].append(to_uint8(reference))
+        rec["distorted"].append(to_uint8(distorted))
         rec["u_true"].append(u_true_t.astype(np.float32))
         rec["u_est"].append(u_est_t.astype(np.float32))
         log.info("%s: displacement up to %.2f px, circle of confusion %.1f px", cam.name,
