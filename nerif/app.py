@@ -5,15 +5,15 @@ import logging
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
 from nerif.data import DATASETS
-from nerif.export import atomic_write, write_json, write_npz, write_vti
+from nerif.export import write_json, write_npz, write_png, write_vti
 from nerif.masks import MASKS
-from nerif.plots import curves_figure, save_figure, sensing_figure, slice_figure
+from nerif.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
+from nerif.sensing.displacement import view_displacements
 from nerif.solvers import SOLVERS
 
 log = logging.getLogger(__name__)
@@ -64,9 +64,8 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
         for k, v in m.items():
             if k != "iteration":
                 writer.add_scalar(f"eval/{k}", v, it)
-        if scene.truth_T is not None and (it % tc.image_every == 0 or it == trainer.iterations):
-            T = scene.ambient.temperature_from_sigma(trainer.reconstruction())
-            writer.add_figure("slices", slice_figure(T, scene.box, scene.truth_T, f"iteration {it}"), it)
+        if it % tc.image_every == 0 or it == trainer.iterations:
+            writer.add_figure("slices", volume_slices(trainer.reconstruction(), scene, f"iteration {it}"), it)
         writer.flush()
 
     log.info("%s: %d views, %d rays; %s, device %s", cfg.data.name, scene.n_views, len(scene.dirs),
@@ -96,11 +95,6 @@ def write_masks(masks, scene, out_dir: Path) -> None:
         write_vti(out_dir / "mask3d.vti", scene.box.voxel_mm, origin, mask=masks.volume.astype(np.float32))
 
 
-def write_png(path: Path, image: np.ndarray) -> None:
-    ok, png = cv2.imencode(".png", image)
-    atomic_write(path, lambda t: Path(t).write_bytes(png.tobytes()))
-
-
 def write_sensing(scene, out_dir: Path) -> None:
     """Realistic sensing, per view: the reference and distorted images (8-bit PNG, as a camera would save
     them) and a figure of images and displacements."""
@@ -115,25 +109,55 @@ def write_sensing(scene, out_dir: Path) -> None:
                     out_dir / "sensing" / f"view{v:02d}.png")
 
 
+def volume_slices(sigma: np.ndarray, scene, title: str):
+    """Slices of the temperature (with the truth where known), or of sigma when no temperature can be inferred."""
+    if not scene.ambient.temperature_known:
+        return slice_figure(sigma, scene.box, None, title, unit="sigma", hot=-1)
+    return slice_figure(scene.ambient.temperature_from_sigma(sigma), scene.box, scene.truth_T, title)
+
+
+def write_heldout(trainer, scene, out_dir: Path) -> dict:
+    """Predictions on every held-out ray: their errors, and per view a figure of observed, predicted and
+    difference (image displacements [px] where deflections are physical, else deflections)."""
+    h = scene.heldout
+    pred = trainer.heldout_predictions()
+    physical = h.ambient.temperature_known
+    obs_all = view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras) if physical else h.eps
+    pred_all = view_displacements(pred, h.dirs, h.ray_views(), h.cameras) if physical else pred
+    for v, cam in enumerate(h.cameras):
+        sl = h.view_slice(v)
+        imgs = []
+        for vec in (obs_all[sl], pred_all[sl]):
+            img = np.full((cam.height * cam.width, vec.shape[-1]), np.nan)
+            img[h.pixel[sl].cpu().numpy()] = vec.detach().cpu().double().numpy()
+            imgs.append(img.reshape(cam.height, cam.width, -1))
+        save_figure(heldout_figure(*imgs, unit="px" if physical else "sigma", title=f"held out: {cam.name}"),
+                    out_dir / "heldout" / f"view{v:02d}.png")
+    return trainer.heldout_errors(torch.arange(len(h.dirs), device=h.dirs.device), pred)
+
+
 def write_outputs(trainer, scene, cfg: DictConfig, out_dir: Path, losses) -> dict:
-    """Volumes (.npz, .vti), slice and curve PNGs, and the metrics of the final state."""
+    """Volumes (.npz, .vti), slice and curve PNGs, held-out figures, and the metrics of the final state."""
     amb, box = scene.ambient, scene.box
     sigma = trainer.reconstruction()
-    delta = sigma * amb.delta_thre
-    n = amb.n_from_sigma(sigma)
-    T = amb.temperature_from_sigma(sigma)
-    origin = [float(a[0]) for a in box.axes()]
-    vols = {"T": T, "n": n, "delta": delta, "sigma": sigma}
+    vols = {"sigma": sigma}
+    if amb.temperature_known:
+        vols.update(T=amb.temperature_from_sigma(sigma), n=amb.n_from_sigma(sigma), delta=sigma * amb.delta_thre)
     if scene.truth_T is not None:
         vols["T_true"] = scene.truth_T
+    origin = [float(a[0]) for a in box.axes()]
     write_npz(out_dir / "reconstruction.npz", voxel_mm=box.voxel_mm, origin_mm=np.asarray(origin), T0=amb.T0, n0=amb.n0,
               delta_thre=amb.delta_thre, **vols)
     write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, **vols)
     label = " + ".join(str(v) for k, v in trainer.labels.items() if k != "lam")
-    save_figure(slice_figure(T, box, scene.truth_T, f"{label}, {trainer.iteration} iterations"), out_dir / "slices.png")
+    save_figure(volume_slices(sigma, scene, f"{label}, {trainer.iteration} iterations"), out_dir / "slices.png")
     save_figure(curves_figure(trainer.history, losses), out_dir / "curves.png")
     final = dict(trainer.history[-1]) if trainer.history else trainer.evaluate()
     final.pop("iteration", None)
+    if scene.heldout is not None:
+        final.update(write_heldout(trainer, scene, out_dir))  # every held-out ray, not the evaluation subset
+    if not amb.temperature_known:
+        final["deflection_unit"] = "sigma (the data are deflections of sigma; no temperature is inferred)"
     final.update(trainer.timing())
     final["wall_time_s"] = trainer.train_seconds
     final["history"] = trainer.history
@@ -141,7 +165,7 @@ def write_outputs(trainer, scene, cfg: DictConfig, out_dir: Path, losses) -> dic
     if scene.sensing is not None:
         final["displacement_rmse_px"] = float(scene.sensing["displacement_rmse_px"])
         final["circle_of_confusion_px"] = float(scene.sensing["circle_of_confusion_px"])
-    if scene.truth_T is not None:
+    if amb.temperature_known:
         final["temperature_note"] = ("temperature from n assuming an air-dominated gas of fixed composition "
                                      "(n - 1 = T0 (n0 - 1) / T)")
     return final
@@ -151,6 +175,10 @@ def summary_line(m: dict, out_dir: Path) -> str:
     parts = []
     if "temperature_rmse_K" in m:
         parts.append(f"T RMSE {m['temperature_rmse_K']:.1f} K (flame {m['temperature_rmse_flame_K']:.1f} K)")
-    parts.append(f"deflection RMSE {m['deflection_rmse']:.3g} rad")
+    unit = "sigma" if "deflection_unit" in m else "rad"
+    parts.append(f"deflection RMSE {m['deflection_rmse']:.3g} {unit}")
+    if "heldout_psnr_db" in m:
+        px = f", {m['heldout_displacement_rmse_px']:.3g} px" if "heldout_displacement_rmse_px" in m else ""
+        parts.append(f"held out: RMSE {m['heldout_deflection_rmse']:.3g} {unit}{px}, PSNR {m['heldout_psnr_db']:.1f} dB")
     parts.append(f"{m['iterations']} it in {m['wall_time_s']:.0f} s ({m['ms_per_iteration']:.1f} ms/it)")
     return "nerif: " + " | ".join(parts) + f" | {out_dir}"

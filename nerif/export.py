@@ -13,6 +13,12 @@ import numpy as np
 import torch
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def atomic_write(path: Path, write: Callable[[str], None]) -> Path:
     """Call ``write(tmp_path)`` then rename onto ``path``: a crash never leaves a half-written file."""
     path = Path(path)
@@ -21,6 +27,7 @@ def atomic_write(path: Path, write: Callable[[str], None]) -> Path:
     os.close(fd)
     try:
         write(tmp)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes files private; outputs get the usual permissions
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -85,3 +92,13 @@ def write_vti(path: Path, voxel_mm: float, origin_mm, **volumes: np.ndarray) -> 
             f.write(text)
 
     return atomic_write(path, write)
+
+
+def write_png(path: Path, image: np.ndarray) -> Path:
+    """An 8- or 16-bit image (H, W) or (H, W, C) as a PNG, atomically."""
+    import cv2
+
+    ok, png = cv2.imencode(".png", image)
+    if not ok:
+        raise ValueError(f"could not encode {path} as PNG (dtype {image.dtype}, shape {image.shape})")
+    return atomic_write(Path(path), lambda t: Path(t).write_bytes(png.tobytes()))

@@ -67,7 +67,11 @@ class NeuralField(nn.Module):
         return out.reshape(box.shape)
 
 
-def build_field(cfg, box: ProbeBox, gate=None) -> NeuralField:
-    """Field from the ``encoder`` and ``field`` config groups."""
-    return NeuralField(ENCODERS.build(cfg.encoder), box, hidden=tuple(cfg.field.hidden),
-                       prior=tuple(cfg.field.prior), gate=gate)
+DEFAULT_PRIOR = (-1.05, 0.05)  # hot gas in cooler ambient: sigma from -1 (T_max) to slightly above 0
+
+
+def build_field(cfg, box: ProbeBox, gate=None, data_prior=None) -> NeuralField:
+    """Field from the ``encoder`` and ``field`` config groups. Its prior interval: ``field.prior`` when set, else
+    the one the data give (``data_prior``), else :data:`DEFAULT_PRIOR`."""
+    prior = cfg.field.prior if cfg.field.prior is not None else (data_prior or DEFAULT_PRIOR)
+    return NeuralField(ENCODERS.build(cfg.encoder), box, hidden=tuple(cfg.field.hidden), prior=tuple(prior), gate=gate)

@@ -1,8 +1,9 @@
 """The iteration loop shared by every solver: progress, evaluation cadence, atomic checkpoints, Ctrl-C, timing.
 
 A solver subclasses :class:`IterativeSolver` and provides ``step() -> dict`` (one timed iteration, its
-terms as floats), ``evaluate() -> dict`` (appends to ``history``), ``reconstruction() -> sigma volume`` and
-``state_dict`` / ``load_state_dict`` for checkpoints.
+terms as floats), ``evaluate() -> dict`` (appends to ``history``), ``reconstruction() -> sigma volume``,
+``predict(origins, dirs) -> deflections`` (of any rays, for the held-out views) and ``state_dict`` /
+``load_state_dict`` for checkpoints.
 """
 from __future__ import annotations
 
@@ -14,10 +15,19 @@ import numpy as np
 import torch
 
 from nerif.export import atomic_save_torch
-from nerif.metrics import flame_region, rmse
+from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
+from nerif.sensing.displacement import view_displacements
 
 log = logging.getLogger(__name__)
 _COUNTERS = ("iteration", "history", "train_seconds", "step_times")
+
+
+def fixed_rays(scene, per_view: int, seed: int) -> torch.Tensor:
+    """Up to ``per_view`` random rays of every view of ``scene`` (scene indices), the same for a given seed."""
+    g = torch.Generator().manual_seed(seed)
+    counts, starts = scene.view_counts().cpu(), scene.view_start.cpu()
+    idx = [s + torch.randperm(int(c), generator=g)[:per_view] for s, c in zip(starts[:-1], counts)]
+    return torch.cat(idx).to(scene.dirs.device)
 
 
 class IterativeSolver:
@@ -26,10 +36,18 @@ class IterativeSolver:
 
     name = "solver"
 
-    def __init__(self, scene, iterations: int, flame_threshold_K: float = 1.0):
+    def __init__(self, scene, iterations: int, flame_threshold_K: float = 1.0, heldout_rays_per_view: int = 256,
+                 seed: int = 0):
         if iterations < 1:
             raise ValueError(f"iterations must be at least 1, got {iterations}")
         self.scene, self.iterations = scene, int(iterations)
+        self._heldout_index, self._heldout_peaks = None, {}
+        if scene.heldout is not None:
+            h = scene.heldout
+            self._heldout_index = fixed_rays(h, heldout_rays_per_view, seed + 2)
+            self._heldout_peaks["deflection"] = value_range(h.eps)  # PSNR peaks: the range of every observation
+            if h.ambient.temperature_known:
+                self._heldout_peaks["displacement"] = value_range(view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras))
         self.device = scene.dirs.device
         self.flame_threshold_K = flame_threshold_K
         self.iteration = 0
@@ -52,6 +70,37 @@ class IterativeSolver:
         return {"temperature_rmse_K": rmse(T, Tt),
                 "temperature_rmse_flame_K": rmse(T, Tt, flame_region(Tt, amb.T0, self.flame_threshold_K)),
                 "sigma_rmse": rmse(sigma, amb.sigma_from_temperature(Tt))}
+
+    def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
+        """Deflections [rad] (R, 3) of rays (R, 3) through the current field; only their part perpendicular to
+        the rays when the scene's observations are perpendicular-only."""
+        raise NotImplementedError
+
+    def heldout_predictions(self, index: Optional[torch.Tensor] = None) -> torch.Tensor:
+        """Predicted deflections [rad] of the held-out rays ``index`` (default: all), (R, 3)."""
+        h = self.scene.heldout
+        index = torch.arange(len(h.dirs), device=h.dirs.device) if index is None else index
+        return self.predict(h.origins[h.ray_views()[index]], h.dirs[index])
+
+    def heldout_errors(self, index: Optional[torch.Tensor] = None, pred: Optional[torch.Tensor] = None) -> dict:
+        """Errors on the held-out views (empty without any): deflection RMSE [rad] and PSNR [dB] of the predicted
+        deflections against the observed ones and, where deflections have physical units, the same for the image
+        displacements [px] the cameras would see. ``index``: held-out rays (default: the fixed evaluation subset);
+        ``pred``: their predictions when already computed."""
+        h = self.scene.heldout
+        if h is None:
+            return {}
+        index = self._heldout_index if index is None else index
+        pred = self.heldout_predictions(index) if pred is None else pred
+        obs = h.eps[index]
+        peaks = self._heldout_peaks
+        m = {"heldout_deflection_rmse": deflection_rmse(pred, obs), "heldout_psnr_db": psnr_db(pred, obs, peaks["deflection"])}
+        if h.ambient.temperature_known:
+            views, d = h.ray_views()[index], h.dirs[index]
+            u_pred, u_obs = (view_displacements(e, d, views, h.cameras) for e in (pred, obs))
+            m.update(heldout_displacement_rmse_px=deflection_rmse(u_pred, u_obs),
+                     heldout_displacement_psnr_db=psnr_db(u_pred, u_obs, peaks["displacement"]))
+        return m
 
     # --- checkpoints ---
     def state_dict(self) -> dict:

@@ -20,3 +20,18 @@ def flame_region(T_true: np.ndarray, T0: float, threshold_K: float = 1.0) -> np.
 def deflection_rmse(eps: torch.Tensor, eps_obs: torch.Tensor) -> float:
     """sqrt(mean over rays of |eps - eps_obs|^2); (R, 3) each."""
     return float(((eps - eps_obs) ** 2).sum(-1).mean().sqrt())
+
+
+def value_range(x: torch.Tensor) -> float:
+    """max - min over all components: the peak of :func:`psnr_db`."""
+    return float(x.max() - x.min())
+
+
+def psnr_db(pred: torch.Tensor, obs: torch.Tensor, peak: float | None = None) -> float:
+    """Peak signal-to-noise ratio of (R, C) predictions against observations: 10 log10(peak^2 / MSE), MSE the
+    mean over rays and components, ``peak`` the observations' :func:`value_range` unless given (give the range of
+    every observation when scoring a subset, so that subsets are comparable)."""
+    obs = obs.double()
+    mse = float(((pred.double() - obs) ** 2).mean())
+    peak = value_range(obs) if peak is None else peak
+    return float("inf") if mse == 0 else 10.0 * float(np.log10(peak**2 / mse))

@@ -10,6 +10,7 @@ All functions work on numpy arrays and torch tensors alike.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
@@ -42,24 +43,33 @@ class Ambient:
     Attributes:
         T0: ambient temperature [K].
         n0: ambient refractive index.
-        T_max: hottest expected temperature [K]; sets ``delta_thre``.
+        T_max: hottest expected temperature [K]; sets ``delta_thre``. None: unknown, for data that are already
+            deflections of sigma (the paper's dataset format): ``delta_thre`` is then 1 (deflections and the
+            reconstruction stay in sigma units) and no temperature can be inferred.
     """
 
     T0: float
     n0: float
-    T_max: float
+    T_max: Optional[float]
 
     def __post_init__(self):
         if not self.n0 > 1.0:
             raise ValueError(f"ambient refractive index n0 must exceed 1, got {self.n0}")
         if not self.T0 >= T_MIN_PHYSICAL_K:
             raise ValueError(f"ambient temperature T0 must be at least {T_MIN_PHYSICAL_K} K, got {self.T0}")
-        if not self.T_max > self.T0:
+        if self.T_max is not None and not self.T_max > self.T0:
             raise ValueError(f"hottest expected temperature T_max={self.T_max} K must exceed T0={self.T0} K")
 
     @property
+    def temperature_known(self) -> bool:
+        """Whether sigma maps to temperatures (``T_max`` given)."""
+        return self.T_max is not None
+
+    @property
     def delta_thre(self) -> float:
-        """``|delta|`` at ``T_max`` (dimensionless, ~1e-4 in air)."""
+        """``|delta|`` at ``T_max`` (dimensionless, ~1e-4 in air); 1 when ``T_max`` is unknown."""
+        if self.T_max is None:
+            return 1.0
         return float(abs(delta_from_n(n_from_temperature(self.T_max, self.T0, self.n0), self.n0)))
 
     def sigma_from_temperature(self, T):

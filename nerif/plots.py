@@ -14,12 +14,14 @@ from nerif.export import atomic_write  # noqa: E402
 from nerif.geometry import ProbeBox  # noqa: E402
 
 
-def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = None, title: str = ""):
+def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = None, title: str = "",
+                 unit: str = "K", hot: int = 1):
     """Central vertical slice (x-y at z = 0) and horizontal slice (x-z through the hottest layer) of the
-    reconstruction, with the truth and the error where known. Returns a matplotlib figure."""
+    reconstruction, with the truth and the error where known. ``unit``: of the volume (K, or sigma);
+    ``hot``: +1 where the hottest layer has the largest value, -1 the smallest (sigma). Returns a figure."""
     ref = T_true if T_true is not None else T
     iz = box.shape[2] // 2
-    iy = int(np.unravel_index(np.argmax(ref), ref.shape)[1])
+    iy = int(np.unravel_index(np.argmax(hot * ref), ref.shape)[1])
     ax_x, ax_y, ax_z = box.axes()
     h = box.voxel_mm / 2
     ext_xy = [ax_x[0] - h, ax_x[-1] + h, ax_y[0] - h, ax_y[-1] + h]
@@ -38,7 +40,7 @@ def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = No
             ax.set_xlabel(lab[0])
             ax.set_ylabel(lab[1])
             where = f"z = {ax_z[iz]:.1f} mm" if i == 0 else f"y = {ax_y[iy]:.1f} mm"
-            ax.set_title(f"{name} [K], {where}", fontsize=9)
+            ax.set_title(f"{name} [{unit}], {where}", fontsize=9)
             fig.colorbar(im, ax=ax, fraction=0.046)
     if title:
         fig.suptitle(title, fontsize=10)
@@ -69,6 +71,38 @@ def curves_figure(history: list[dict], losses: list[tuple[int, float]]):
     return fig
 
 
+def image_panels(panels: list, title: str, width_in: float = 3.2, height_in: float = 4.2):
+    """A row of images without axes, each with its title and colour bar: ``panels`` = (title, image, imshow
+    keywords). Returns the figure."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(width_in * len(panels), height_in), squeeze=False)
+    for ax, (name, img, kw) in zip(axes[0], panels):
+        im = ax.imshow(img, **kw)
+        ax.set_title(name, fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        fig.colorbar(im, ax=ax, fraction=0.046)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def heldout_figure(observed: np.ndarray, predicted: np.ndarray, unit: str, title: str = ""):
+    """One held-out view: observed and predicted magnitude, and the magnitude of their difference.
+
+    Args:
+        observed, predicted: (h, w, C) vectors on the camera's pixel grid, NaN where there is no ray.
+        unit: of the vectors (px for displacements, rad or sigma for deflections).
+    """
+    mag_o, mag_p = np.linalg.norm(observed, axis=-1), np.linalg.norm(predicted, axis=-1)
+    diff = np.linalg.norm(predicted - observed, axis=-1)
+    vmax = float(np.nanmax(mag_o)) if np.isfinite(mag_o).any() else 1.0
+    dmax = float(np.nanmax(diff)) if np.isfinite(diff).any() else 1.0
+    panels = [(f"observed [{unit}]", mag_o, dict(cmap="viridis", vmin=0, vmax=vmax or 1.0)),
+              (f"predicted [{unit}]", mag_p, dict(cmap="viridis", vmin=0, vmax=vmax or 1.0)),
+              (f"|predicted - observed| [{unit}]", diff, dict(cmap="magma", vmin=0, vmax=dmax or 1.0))]
+    return image_panels(panels, title, 3.5, 5.2)
+
+
 def sensing_figure(record: dict, view: int, crop_px: int = 160, title: str = ""):
     """One view of realistic sensing: reference and distorted image crops around the largest displacement,
     true and estimated displacement magnitude [image px] on the training grid, and their difference."""
@@ -87,13 +121,4 @@ def sensing_figure(record: dict, view: int, crop_px: int = 160, title: str = "")
               ("|u| true [px]", mag_t, dict(cmap="viridis", vmin=0, vmax=vmax)),
               ("|u| estimated [px]", mag_e, dict(cmap="viridis", vmin=0, vmax=vmax)),
               ("|u est - u true| [px]", diff, dict(cmap="magma", vmin=0, vmax=float(np.nanmax(diff)) or 1.0))]
-    fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 4.2))
-    for ax, (name, img, kw) in zip(axes, panels):
-        im = ax.imshow(img, **kw)
-        ax.set_title(name, fontsize=9)
-        ax.set_xticks([])
-        ax.set_yticks([])
-        fig.colorbar(im, ax=ax, fraction=0.046)
-    fig.suptitle(title or f"view {view}", fontsize=10)
-    fig.tight_layout()
-    return fig
+    return image_panels(panels, title or f"view {view}")

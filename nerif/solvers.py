@@ -22,7 +22,7 @@ def neural(cfg: DictConfig):
     tc = cfg.train
 
     def make(scene, masks):
-        field = build_field(cfg, scene.box, gate=masks.gate).to(scene.dirs.device)
+        field = build_field(cfg, scene.box, gate=masks.gate, data_prior=scene.sigma_prior).to(scene.dirs.device)
         boundary = AmbientBoundary(scene.box, list(cfg.loss.ambient_faces), cfg.loss.ambient_weight,
                                    cfg.loss.ambient_points)
         t = Trainer(field, scene, sampler, dict(cfg.grad.weights), iterations=tc.iterations, boundary=boundary,

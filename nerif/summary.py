@@ -13,10 +13,13 @@ from omegaconf import DictConfig, OmegaConf
 from nerif.export import atomic_write
 
 COLUMNS = [("temperature_rmse_K", "T RMSE [K]", "{:.2f}"), ("temperature_rmse_flame_K", "T RMSE flame [K]", "{:.2f}"),
-           ("deflection_rmse", "deflection RMSE [rad]", "{:.3e}"), ("wall_time_s", "wall time [s]", "{:.1f}"),
+           ("deflection_rmse", "deflection RMSE [rad, or sigma]", "{:.3e}"), ("wall_time_s", "wall time [s]", "{:.1f}"),
            ("ms_per_iteration", "ms/it", "{:.1f}"), ("samples_per_second", "samples/s", "{:.3g}"),
            ("samples_per_ray_mean", "samples/ray", "{:.1f}"),
            ("displacement_rmse_px", "displacement RMSE [px]", "{:.3f}"),
+           ("heldout_deflection_rmse", "held-out deflection RMSE", "{:.4g}"),
+           ("heldout_psnr_db", "held-out PSNR [dB]", "{:.2f}"),
+           ("heldout_displacement_rmse_px", "held-out displacement RMSE [px]", "{:.3f}"),
            ("iterations", "iterations", "{}")]
 
 

@@ -10,7 +10,7 @@ import torch
 from nerif.data import Scene
 from nerif.field import NeuralField
 from nerif.losses import AmbientBoundary, deflection_terms, weighted_sum
-from nerif.loop import IterativeSolver
+from nerif.loop import IterativeSolver, fixed_rays
 from nerif.metrics import deflection_rmse
 from nerif.renderers import render_deflections
 from nerif.renderers.samplers import UniformSampler
@@ -43,7 +43,7 @@ class Trainer(IterativeSolver):
                  eval_rays_per_view: int = 512, flame_threshold_K: float = 1.0, seed: int = 0):
         if rays_per_view < 1:
             raise ValueError(f"rays per view must be at least 1, got {rays_per_view}")
-        super().__init__(scene, iterations, flame_threshold_K)
+        super().__init__(scene, iterations, flame_threshold_K, eval_rays_per_view, seed)
         self.field, self.sampler = field, sampler
         self.weights = {k: float(v) for k, v in weights.items()}
         self.boundary = boundary if boundary is not None and boundary.active else None
@@ -61,16 +61,10 @@ class Trainer(IterativeSolver):
         self.rays_seen = 0
         self.samples_max = 0
         self.rays_skipped = 0
-        self._eval_index = self._eval_rays(eval_rays_per_view, seed)
+        self._eval_index = fixed_rays(scene, eval_rays_per_view, seed + 1)
         self._eval_sampler = UniformSampler(sampler.samples_per_ray, jitter=False)
 
     # --- batches ---
-    def _eval_rays(self, per_view: int, seed: int) -> torch.Tensor:
-        g = torch.Generator().manual_seed(seed + 1)
-        counts, starts = self.scene.view_counts().cpu(), self.scene.view_start.cpu()
-        idx = [s + torch.randperm(int(c), generator=g)[:per_view] for s, c in zip(starts[:-1], counts)]
-        return torch.cat(idx).to(self.device)
-
     def rays(self, index: torch.Tensor):
         """Ray origins, directions and observed deflections (sigma units) of scene rays ``index``."""
         views = torch.searchsorted(self.scene.view_start, index, right=True) - 1
@@ -147,17 +141,27 @@ class Trainer(IterativeSolver):
         self.field.train(was)
         return sigma
 
-    def predicted_deflections(self, index: torch.Tensor, operators=("auto", "discrete")) -> dict:
-        """Deflections [rad] of scene rays ``index`` by each operator, without any parameter graph."""
-        o, d, _ = self.rays(index)
+    def render(self, o: torch.Tensor, d: torch.Tensor, operators=("auto", "discrete")) -> dict:
+        """Deflections [rad] of rays (R, 3) by each operator, without any parameter graph."""
         out = {n: [] for n in operators}
-        for i in range(0, len(index), 4096):
+        for i in range(0, len(d), 4096):
             s = self._eval_sampler(self.scene.box, o[i:i + 4096], d[i:i + 4096])
             eps = render_deflections(self.field, s, {n: False for n in operators}, self.step_mm,
                                      dirs=self._measured(d[i:i + 4096]))
             for n in operators:
-                out[n].append(eps[n] * self.scale)
-        return {n: torch.cat(v) for n, v in out.items()}
+                out[n].append(eps[n].detach() * self.scale)
+        return {n: torch.cat(v) if v else d.new_zeros(0, 3) for n, v in out.items()}
+
+    def predicted_deflections(self, index: torch.Tensor, operators=("auto", "discrete")) -> dict:
+        """Deflections [rad] of scene rays ``index`` by each operator."""
+        o, d, _ = self.rays(index)
+        return self.render(o, d, operators)
+
+    def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
+        """Deflections [rad] by the operator training fits (discrete when it is trained on)."""
+        trained = [n for n, w in self.weights.items() if w > 0]
+        op = "discrete" if "discrete" in trained else trained[0]
+        return self.render(origins, dirs, (op,))[op]
 
     def evaluate(self) -> dict:
         """Metrics now: temperature/sigma errors on the grid (when the truth is known), deflection errors."""
@@ -168,6 +172,7 @@ class Trainer(IterativeSolver):
             m[f"deflection_rmse_{n}"] = deflection_rmse(e, obs)
         trained = [n for n, w in self.weights.items() if w > 0]
         m["deflection_rmse"] = m[f"deflection_rmse_{'discrete' if 'discrete' in trained else trained[0]}"]
+        m.update(self.heldout_errors())
         self.history.append(m)
         return m
 

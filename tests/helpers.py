@@ -10,6 +10,8 @@ TINY = ["device=cpu", "phantom=gaussian_blob", "phantom.shape=[16,16,16]", "phan
         "field.finest_resolution=32", "field.log2_table_size=12"]
 
 
-def tiny_config(*overrides):
+def tiny_config(*overrides, synthetic: bool = True):
+    """The tiny scene's config; ``synthetic=False`` keeps only its solver settings (for another dataset)."""
+    base = TINY if synthetic else [o for o in TINY if not o.startswith(("phantom", "rig.", "data."))]
     with initialize_config_dir(config_dir=CONF, version_base=None):
-        return compose("config", overrides=TINY + list(overrides))
+        return compose("config", overrides=base + list(overrides))

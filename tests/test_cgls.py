@@ -70,6 +70,10 @@ def test_cgls_reconstructs_a_gaussian_blob_from_twelve_views():
     m = s.evaluate()
     assert m["temperature_rmse_K"] < 10.0, m  # peak 1200 K over 296 K ambient
     assert m["relative_residual"] < 0.1
+    # predictions of any rays (held-out views) are the forward model of the solution: on the training rays,
+    # the observations minus the CGLS residual
+    pred = s.predict(sc.origins[sc.ray_views()], sc.dirs)
+    assert torch.allclose(pred, sc.eps - s.cgls.r * s.scale, atol=1e-3 * float(sc.eps.abs().max()))
 
 
 def test_total_variation_beats_plain_cgls_on_a_hot_cube_under_noise(tmp_path):

@@ -23,3 +23,15 @@ def test_deflection_displacement_round_trip_is_exact(view):
     eps = eps - (eps * d).sum(-1, keepdim=True) * d  # straight ray through a bounded field: eps . d = 0
     back = displacement_to_deflection(deflection_to_displacement(eps, d, cam), d, cam)
     torch.testing.assert_close(back, eps, atol=1e-17, rtol=1e-12)
+
+
+def test_view_displacements_are_in_sensor_pixels_whatever_the_binning():
+    from nerif.sensing.displacement import view_displacements
+
+    full, binned = arc_rig(n_cameras=2), arc_rig(n_cameras=2, binning=8)
+    d = torch.stack([full[0].pixel_directions()[1000], full[1].pixel_directions()[5000]])
+    eps = torch.tensor([[1e-4, 2e-4, 0.0], [0.0, -1e-4, 3e-5]], dtype=torch.float64)
+    views = torch.tensor([0, 1])
+    u_full = view_displacements(eps, d, views, full)
+    assert torch.allclose(view_displacements(eps, d, views, binned), u_full)
+    assert torch.allclose(u_full[0], deflection_to_displacement(eps[:1], d[:1], full[0])[0])

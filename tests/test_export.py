@@ -39,3 +39,15 @@ def test_npz_round_trip(tmp_path):
     write_npz(tmp_path / "r.npz", T=np.ones((2, 2, 2)), voxel_mm=0.5)
     z = np.load(tmp_path / "r.npz")
     assert z["T"].shape == (2, 2, 2) and float(z["voxel_mm"]) == 0.5
+
+
+def test_written_files_get_the_usual_permissions(tmp_path):
+    import os
+    import stat
+
+    from nerif.export import atomic_write
+
+    p = atomic_write(tmp_path / "a.txt", lambda t: open(t, "w").write("x"))
+    mask = os.umask(0)
+    os.umask(mask)
+    assert stat.S_IMODE(p.stat().st_mode) == 0o666 & ~mask

@@ -62,3 +62,28 @@ def test_pixel_directions_project_back_to_their_pixels():
 def test_binning_must_divide_the_sensor():
     with pytest.raises(ValueError, match="binning 7"):
         arc_rig(binning=7)
+
+
+def test_camera_from_nerf_pose():
+    from nerif.geometry import camera_from_nerf_pose
+
+    kw = dict(pitch_mm=0.02, length_mm=0.02, f_number=8.0, background_mm=10.0, focal_mm=2.0)
+    c2w = np.eye(4)
+    c2w[2, 3] = 250.0  # 5 mm in pixel-pitch units; OpenGL camera looking along -z at the origin
+    cam = camera_from_nerf_pose(c2w, 100.0, 64, 48, 32.0, 24.0, **kw)
+    assert np.allclose(cam.position, [0, 0, 5]) and cam.image_distance_mm == pytest.approx(2.0)
+    assert np.allclose(cam.rotation, np.diag([1.0, -1.0, -1.0]))  # right +x, image rows down = -y, forward -z
+    # a point 1 mm right of and 1 mm above the axis, 5 mm in front: 100 px * 1/5 right, and up in the image
+    assert np.allclose(cam.project(np.array([1.0, 1.0, 0.0])), [52.0, 4.0])
+    # a reflected pose (det -1, the BOS paper's datasets) is read with its right axis negated: a proper rotation
+    refl = c2w.copy()
+    refl[:3, 0] *= -1
+    assert np.allclose(camera_from_nerf_pose(refl, 100.0, 64, 48, 32.0, 24.0, **kw).rotation, cam.rotation)
+    with pytest.raises(ValueError, match="principal point"):
+        camera_from_nerf_pose(c2w, 100.0, 64, 48, 30.0, 24.0, **kw)
+
+
+def test_arc_rig_at_given_angles_and_binning_is_recorded():
+    cams = arc_rig(angles_deg=[0.0, -90.0], binning=8)
+    assert len(cams) == 2 and np.allclose(cams[1].position, [-800.0, 0.0, 0.0], atol=1e-9)
+    assert cams[0].binning == 8 and cams[0].unbinned(8).binning == 1 and cams[0].unbinned(8).width == 720

@@ -17,3 +17,12 @@ def test_rmse_and_flame_region():
 def test_deflection_rmse_is_over_vector_norms():
     eps = torch.tensor([[3.0, 4.0, 0.0], [0.0, 0.0, 0.0]])
     assert deflection_rmse(eps, torch.zeros(2, 3)) == pytest.approx(np.sqrt(25 / 2))
+
+
+def test_psnr_against_the_observed_range():
+    from nerif.metrics import psnr_db
+
+    obs = torch.linspace(0.0, 2.0, 300).reshape(100, 3)
+    # error 0.02 everywhere, peak-to-peak 2: 10 log10(4 / 4e-4) = 40 dB
+    assert psnr_db(obs + 0.02, obs) == pytest.approx(40.0, abs=1e-4)
+    assert psnr_db(obs, obs) == float("inf")

@@ -38,3 +38,9 @@ def test_check_temperature_errors():
         check_temperature(np.array([300.0, np.nan]), "volume")
     with pytest.raises(ValueError, match="below 1 K"):
         check_temperature(np.array([300.0, 0.5]), "volume")
+
+
+def test_unknown_hottest_temperature_keeps_sigma_units():
+    amb = Ambient(1100.0, 1.00007253, None)
+    assert not amb.temperature_known and amb.delta_thre == 1.0
+    assert Ambient(296.15, 1.00027, 2000.0).temperature_known

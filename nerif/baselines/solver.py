@@ -13,6 +13,7 @@ from nerif.baselines.projector import PROJECTORS, SparseProjector
 from nerif.geometry import face_axes
 from nerif.loop import IterativeSolver
 from nerif.renderers.deflection import perpendicular
+from nerif.renderers.voxel import voxel_deflection
 
 def boundary_mask(shape, faces) -> np.ndarray:
     """(nx, ny, nz) bool, False on the given faces of the grid (``x``, ``y``, ``z``: both faces of that axis)."""
@@ -62,8 +63,8 @@ class CGLSSolver(IterativeSolver):
                  tol: Optional[float] = None, reweight_every: int = 20, tv_eps: float = 1e-3,
                  ambient_faces=("x",), mask_volume: Optional[np.ndarray] = None, projector: str = "auto",
                  max_matrix_gib: float = 4.0, step_mm: Optional[float] = None, chunk: int = 1 << 14,
-                 dtype: str = "float32", flame_threshold_K: float = 1.0):
-        super().__init__(scene, iterations, flame_threshold_K)
+                 dtype: str = "float32", flame_threshold_K: float = 1.0, heldout_rays_per_view: int = 256):
+        super().__init__(scene, iterations, flame_threshold_K, heldout_rays_per_view)
         dt = getattr(torch, dtype)
         self.scale = scene.ambient.delta_thre
         origins = scene.origins[scene.ray_views()].to(dt)
@@ -90,6 +91,7 @@ class CGLSSolver(IterativeSolver):
         def Atb(y):
             return self.projector.Atb(P(y))
 
+        self.step_mm, self.dtype = step_mm, dt
         self.cgls = CGLS(Ax, Atb, b, scene.box.shape, regularizer=regularizer, lam=lam,
                          mask=mask, reweight_every=reweight_every, tv_eps=tv_eps)
 
@@ -104,11 +106,16 @@ class CGLSSolver(IterativeSolver):
     def reconstruction(self) -> np.ndarray:
         return self.cgls.solution().cpu().numpy().astype(np.float64)
 
+    def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
+        d = dirs.to(self.dtype)
+        eps = voxel_deflection(self.cgls.solution(), self.scene.box, origins.to(self.dtype), d, self.step_mm) * self.scale
+        return perpendicular(eps, d) if self.scene.perpendicular_only else eps
+
     def evaluate(self) -> dict:
         r = self.cgls.r * self.scale  # data residual [rad]
         m = {"iteration": self.iteration, "wall_time_s": self.train_seconds, **self.field_errors(self.reconstruction()),
              "deflection_rmse": float((r.double() ** 2).sum(-1).mean().sqrt()),
-             "relative_residual": self.cgls.residual()}
+             "relative_residual": self.cgls.residual(), **self.heldout_errors()}
         self.history.append(m)
         return m
 

@@ -76,6 +76,10 @@ class Scene:
             then compare only that part. False for ideal sensing (full vectors).
         sensing: what realistic sensing produced (images, true and estimated displacements; see
             :func:`nerif.sensing.realistic.realistic`), else None.
+        mask_images: per view, (height, width) bool 2-D masks that came with the data (the mask builders then
+            use them instead of thresholding the deflections), else None.
+        heldout: the views kept out of training, as a scene of their own (same box and ambient), else None.
+        sigma_prior: (a, b) interval of sigma the data say the field lies in, else None (the field's default).
     """
 
     box: ProbeBox
@@ -89,6 +93,9 @@ class Scene:
     truth_T: Optional[np.ndarray] = None
     sensing: Optional[dict] = None
     perpendicular_only: bool = False
+    mask_images: Optional[list] = None
+    heldout: Optional["Scene"] = None
+    sigma_prior: Optional[tuple] = None
 
     @property
     def n_views(self) -> int:
@@ -107,7 +114,44 @@ class Scene:
 
     def to(self, device) -> "Scene":
         return replace(self, origins=self.origins.to(device), dirs=self.dirs.to(device), eps=self.eps.to(device),
-                       pixel=self.pixel.to(device), view_start=self.view_start.to(device))
+                       pixel=self.pixel.to(device), view_start=self.view_start.to(device),
+                       heldout=self.heldout.to(device) if self.heldout is not None else None)
+
+
+def scene_from_images(box: ProbeBox, ambient: Ambient, cameras: list[Camera], eps_images: list[np.ndarray],
+                      valid: list[np.ndarray], device="cpu", **fields) -> Scene:
+    """A scene of measured deflections: per view, the image pixels that are ``valid`` and whose ray crosses the box.
+
+    Args:
+        eps_images: per view, (height, width, 3) world-frame deflections [rad], as measured through image
+            displacements; they are stored perpendicular to each ray (see :func:`perpendicular`).
+        valid: per view, (height, width) bool: the region of interest and finite data.
+        fields: further :class:`Scene` fields (``mask_images``, ``heldout``, ``sensing``).
+    Raises a clear error for a view with no valid pixel on the box.
+    """
+    origins, dirs, pixel, view_start = rays_in_box(box, cameras, device)
+    eps = torch.cat([torch.as_tensor(img.reshape(-1, 3), dtype=torch.float32, device=device)[pixel[view_start[v]:view_start[v + 1]]]
+                     for v, img in enumerate(eps_images)])
+    keep = torch.cat([torch.as_tensor(ok.reshape(-1), device=device)[pixel[view_start[v]:view_start[v + 1]]]
+                      for v, ok in enumerate(valid)])
+    keep &= torch.isfinite(eps).all(-1)
+    dirs, eps, pixel, view_start = keep_rays(dirs, eps, pixel, view_start, keep)
+    for v, n in enumerate(view_start.diff().tolist()):
+        if n == 0:
+            raise ValueError(f"{cameras[v].name}: no pixel of its region of interest sees the probe box "
+                             f"{box.extent_mm.tolist()} mm: check the region of interest, the pose and the probe box")
+    return Scene(box, ambient, cameras, origins, dirs, perpendicular(eps, dirs), pixel, view_start,
+                 perpendicular_only=True, **fields)
+
+
+def dataset_folder(root) -> Path:
+    """``data.root`` as an existing folder, or a clear error."""
+    if root in (None, "", "???"):
+        raise ValueError("data.root is not set: give the dataset folder, e.g. data.root=/path/to/folder")
+    path = Path(str(root)).expanduser()
+    if not path.is_dir():
+        raise FileNotFoundError(f"data.root={root} is not a folder")
+    return path
 
 
 def rays_in_box(box: ProbeBox, cameras: list[Camera], device="cpu"):

@@ -6,6 +6,7 @@ its centre is at (i + 0.5, j + 0.5).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Optional
 
 import numpy as np
 import torch
@@ -25,6 +26,7 @@ class Camera:
         background_mm: distance from the camera to the background plane along its axis [mm].
         focal_mm: lens focal length [mm].
         name: label used in messages.
+        binning: how many sensor pixels one pixel of this camera spans per side (see :meth:`binned`).
     """
 
     position: np.ndarray
@@ -37,6 +39,7 @@ class Camera:
     background_mm: float
     focal_mm: float
     name: str = "camera"
+    binning: int = 1
 
     @property
     def principal_point(self) -> tuple[float, float]:
@@ -46,11 +49,13 @@ class Camera:
         """The same optics read out with ``factor x factor`` pixel binning."""
         if factor < 1 or self.width % factor or self.height % factor:
             raise ValueError(f"binning {factor} must divide the sensor size {self.width} x {self.height} px")
-        return replace(self, pitch_mm=self.pitch_mm * factor, width=self.width // factor, height=self.height // factor)
+        return replace(self, pitch_mm=self.pitch_mm * factor, width=self.width // factor, height=self.height // factor,
+                       binning=self.binning * factor)
 
     def unbinned(self, factor: int) -> "Camera":
         """The full sensor of a camera read out with ``factor x factor`` binning (inverse of :meth:`binned`)."""
-        return replace(self, pitch_mm=self.pitch_mm / factor, width=self.width * factor, height=self.height * factor)
+        return replace(self, pitch_mm=self.pitch_mm / factor, width=self.width * factor, height=self.height * factor,
+                       binning=max(self.binning // factor, 1))
 
     def pixel_directions(self, dtype=torch.float64) -> torch.Tensor:
         """Unit ray directions through every pixel centre, (height * width, 3), row-major (row j, column i)."""
@@ -67,6 +72,36 @@ class Camera:
         cx, cy = self.principal_point
         k = self.image_distance_mm / self.pitch_mm
         return np.stack([pc[..., 0] / pc[..., 2] * k + cx, pc[..., 1] / pc[..., 2] * k + cy], -1)
+
+
+def camera_from_nerf_pose(c2w, focal_px: float, width: int, height: int, cx: float, cy: float, pitch_mm: float,
+                          length_mm: float, f_number: float, background_mm: float, focal_mm: float,
+                          name: str = "camera") -> Camera:
+    """A camera from a NeRF-style pose (camera-to-world 4 x 4, OpenGL axes: x right, y up, looking along -z).
+
+    Args:
+        c2w: (4, 4) or (3, 4) pose; translation in units of ``length_mm`` millimetres.
+        focal_px, cx, cy: intrinsics [px]; the principal point must be the sensor centre.
+        pitch_mm: pixel pitch [mm]. f_number, background_mm, focal_mm: optics the pose does not hold.
+
+    A pose whose rotation has determinant -1 (a reflection, as in the BOS paper's datasets) is read the way
+    the paper authors' loader reads it: it renders image columns right to left, which is the same as negating
+    the right axis, and the result is a proper rotation again.
+    """
+    c2w = np.asarray(c2w, dtype=np.float64)
+    if c2w.shape not in ((4, 4), (3, 4)) or not np.all(np.isfinite(c2w)):
+        raise ValueError(f"{name}: a pose must be a finite 4 x 4 or 3 x 4 matrix, got shape {c2w.shape}")
+    if abs(cx - width / 2) > 1e-6 or abs(cy - height / 2) > 1e-6:
+        raise ValueError(f"{name}: principal point ({cx}, {cy}) px is not the sensor centre "
+                         f"({width / 2}, {height / 2}); off-centre principal points are not supported")
+    R = c2w[:3, :3] @ np.diag([1.0, -1.0, -1.0])  # OpenGL (right, up, back) -> (right, down, forward)
+    det = np.linalg.det(R)
+    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6):
+        raise ValueError(f"{name}: the pose's rotation part is not orthonormal")
+    if det < 0:
+        R[:, 0] = -R[:, 0]
+    return Camera(c2w[:3, 3] * length_mm, R, focal_px * pitch_mm, pitch_mm, int(width), int(height),
+                  float(f_number), float(background_mm), float(focal_mm), name=name)
 
 
 def look_at_origin(position: np.ndarray) -> np.ndarray:
@@ -91,20 +126,27 @@ def arc_rig(
     background_behind_mm: float = 800.0,
     f_number: float = 32.0,
     binning: int = 1,
+    angles_deg: Optional[list[float]] = None,
 ) -> list[Camera]:
     """Cameras evenly over ``span_deg`` on an arc in the x-z plane, all looking at the origin and focused
     on a background plane ``background_behind_mm`` behind the centre (paper defaults).
 
-    Camera k sits at angle ``theta_k = k * span / (n - 1)`` from +z towards +x: position
-    ``distance * (sin theta, 0, cos theta)``.
+    Camera k sits at angle ``theta_k = k * span / (n - 1)`` from +z towards +x (or ``angles_deg[k]`` when given,
+    which then sets the number of cameras): position ``distance * (sin theta, 0, cos theta)``. A burner turned by
+    +theta about y in front of a fixed camera is the same as the camera at -theta.
     """
+    if angles_deg is not None:
+        n_cameras = len(angles_deg)
     if n_cameras < 1:
         raise ValueError(f"a rig needs at least one camera, got {n_cameras}")
     background_mm = distance_mm + background_behind_mm
     if not focal_mm < background_mm:
         raise ValueError(f"a {focal_mm} mm lens cannot focus on a background {background_mm} mm away")
     image_distance = 1.0 / (1.0 / focal_mm - 1.0 / background_mm)
-    angles = np.linspace(0.0, np.deg2rad(span_deg), n_cameras) if n_cameras > 1 else np.zeros(1)
+    if angles_deg is not None:
+        angles = np.deg2rad(np.asarray(angles_deg, dtype=np.float64))
+    else:
+        angles = np.linspace(0.0, np.deg2rad(span_deg), n_cameras) if n_cameras > 1 else np.zeros(1)
     cams = []
     for k, th in enumerate(angles):
         pos = distance_mm * np.array([np.sin(th), 0.0, np.cos(th)])

@@ -40,6 +40,13 @@ def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2) -> lis
     return out
 
 
+def masks_2d(scene, threshold: float, radius_px: int) -> list[np.ndarray]:
+    """The 2-D masks that came with the data, else :func:`deflection_masks`."""
+    if scene.mask_images is not None:
+        return [np.asarray(m, dtype=bool) for m in scene.mask_images]
+    return deflection_masks(scene, threshold, radius_px)
+
+
 def back_project(box: ProbeBox, cameras, images: list[np.ndarray], n_cameras_required: int | None = None) -> np.ndarray:
     """3-D mask: voxels whose centre projects inside the 2-D masks of at least ``n_cameras_required`` views
     (default: all, the visual hull). Returns (nx, ny, nz) bool."""
@@ -87,14 +94,14 @@ def no_mask(scene) -> Masks:
 @MASKS.register("2d")
 def mask_2d(scene, threshold: float = 0.001, radius_px: int = 2) -> Masks:
     """Training rays drawn inside each view's 2-D mask."""
-    images = deflection_masks(scene, threshold, radius_px)
+    images = masks_2d(scene, threshold, radius_px)
     return Masks(images=images, inside=_inside(scene, images))
 
 
 @MASKS.register("3d")
 def mask_3d(scene, threshold: float = 0.001, radius_px: int = 2, n_cameras_required: int | None = None) -> Masks:
     """2-D ray sampling plus the back-projected 3-D mask gating the field."""
-    images = deflection_masks(scene, threshold, radius_px)
+    images = masks_2d(scene, threshold, radius_px)
     volume = back_project(scene.box, scene.cameras, images, n_cameras_required)
     if not volume.any():
         raise ValueError("the 3-D mask is empty: no voxel lies inside enough 2-D masks (lower mask.threshold, "

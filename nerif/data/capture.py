@@ -1,0 +1,279 @@
+"""BOS captures as an experimentalist records them: a folder of background images and a rig file.
+
+Folder layout (``rig.yaml`` format version 1)::
+
+    rig.yaml                 # the rig, below
+    distorted_00.png ...     # one image per view, through the flow (8- or 16-bit greyscale, all alike)
+    reference_00.png ...     # the background without flow: one per view, or one shared file
+
+``rig.yaml``::
+
+    format: nerif-capture
+    version: 1
+    camera:
+      focal_mm: 105.0                  # lens focal length
+      pitch_um: 20.0                   # pixel pitch
+      sensor_px: [720, 1280]           # width, height of every image
+      f_number: 32.0
+      camera_to_centre_mm: 800.0       # camera to the probe centre (the burner axis)
+      camera_to_background_mm: 1600.0  # camera to the background plane (the focus)
+    views:
+      angles_deg: [0.0, 15.0, ...]     # camera position around the burner axis (y), from +z towards +x;
+                                       # a rotating burner turned by +a is a camera at -a
+      images: [distorted_00.png, ...]  # one per angle
+      references: reference.png        # one shared file, or a list (one per view)
+    roi_px: [0, 0, 720, 1280]          # region of interest: x, y (0-based, top left), width, height [px]
+    probe:                             # reconstruction grid, centred on the burner axis at the camera height
+      shape: [36, 50, 36]              # nx, ny, nz (y vertical)
+      voxel_mm: 2.0
+    ambient: {T0: 296.15, n0: 1.00027}
+    T_max: 2000.0                      # optional: hottest expected temperature [K] (sets the field's scale)
+    temperature_range_K: [296.15, 2000.0]  # optional: coldest and hottest gas expected (the field's prior;
+                                       # default: ambient to T_max, i.e. a flame hotter than its surroundings)
+    heldout: [11]                      # optional: views never trained on (default: the last)
+
+The pipeline per view: optical flow between distorted and reference image (``flow`` config), block means to
+the processing grid (``binning``), displacement -> deflection through the rig geometry, rays inside the ROI that
+cross the probe box. Everything that can be wrong with the folder is checked before the flow runs.
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Optional
+
+import cv2
+import numpy as np
+import torch
+import yaml
+
+from nerif.data.scene import DATASETS, Scene, dataset_folder, rays_in_box, scene_from_images
+from nerif.export import atomic_write, write_png
+from nerif.geometry import ProbeBox, arc_rig
+from nerif.physics import Ambient
+from nerif.sensing.displacement import displacement_to_deflection
+from nerif.sensing.flow import FLOW
+from nerif.sensing.realistic import resample
+
+log = logging.getLogger(__name__)
+RIG_FILE = "rig.yaml"
+RIG_VERSION = 1
+IMAGE_SUFFIXES = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
+_DEPTHS = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
+
+
+def _need(d: dict, key: str, where: str):
+    if not isinstance(d, dict) or key not in d or d[key] is None:
+        raise ValueError(f"{where} lacks '{key}': see the rig file format in nerif/data/capture.py")
+    return d[key]
+
+
+def read_rig(root: Path) -> dict:
+    """``rig.yaml`` of a capture folder, checked: format, version, required keys, view lists."""
+    path = root / RIG_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} does not exist: a capture folder needs a {RIG_FILE} beside its images")
+    rig = yaml.safe_load(path.read_text())
+    if not isinstance(rig, dict) or rig.get("format") != "nerif-capture":
+        raise ValueError(f"{path} is not a nerif capture rig file (it needs 'format: nerif-capture')")
+    if rig.get("version") != RIG_VERSION:
+        raise ValueError(f"{path} has version {rig.get('version')}; this nerif reads version {RIG_VERSION}")
+    cam, views = _need(rig, "camera", str(path)), _need(rig, "views", str(path))
+    for k in ("focal_mm", "pitch_um", "sensor_px", "f_number", "camera_to_centre_mm", "camera_to_background_mm"):
+        _need(cam, k, f"{path} camera")
+    angles, images = _need(views, "angles_deg", f"{path} views"), _need(views, "images", f"{path} views")
+    refs = _need(views, "references", f"{path} views")
+    if len(angles) != len(images):
+        raise ValueError(f"{path}: views.angles_deg has {len(angles)} angles but views.images lists {len(images)} "
+                         "images; give one angle per image")
+    if isinstance(refs, list) and len(refs) != len(images):
+        raise ValueError(f"{path}: views.references lists {len(refs)} files for {len(images)} images; give one "
+                         "per image or a single shared file")
+    for k in ("roi_px", "probe", "ambient"):
+        _need(rig, k, str(path))
+    return rig
+
+
+def read_grey(path: Path) -> np.ndarray:
+    """A greyscale 8- or 16-bit image as stored (raises for colour, other depths, unreadable files)."""
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ValueError(f"{path} is not a readable image")
+    if img.ndim == 3 and img.shape[2] > 1:
+        raise ValueError(f"{path} is a colour image ({img.shape[2]} channels); BOS needs greyscale: convert it "
+                         "(or save the camera's raw greyscale frame)")
+    img = img.reshape(img.shape[:2])
+    if img.dtype not in _DEPTHS:
+        raise ValueError(f"{path} is {img.dtype}; nerif reads 8-bit or 16-bit greyscale images")
+    return img
+
+
+def capture_files(root: Path, rig: dict) -> tuple[list[Path], list[Path]]:
+    """The distorted and reference image of every view; raises for a missing file or an unlisted image."""
+    views = rig["views"]
+    refs = views["references"] if isinstance(views["references"], list) else [views["references"]] * len(views["images"])
+    distorted, references = [root / f for f in views["images"]], [root / f for f in refs]
+    for k, p in enumerate(distorted + references):
+        if not p.is_file():
+            kind = f"view {k} image" if k < len(distorted) else f"view {k - len(distorted)} reference"
+            raise FileNotFoundError(f"{root / RIG_FILE} lists {kind} '{p.name}', which does not exist in {root}: "
+                                    "add the file or remove the view")
+    listed = {p.resolve() for p in distorted + references}
+    extra = sorted(p.name for p in root.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.resolve() not in listed)
+    if extra:
+        raise ValueError(f"{root} holds image(s) {', '.join(extra)} that {RIG_FILE} does not list: add each to "
+                         "views (with its angle) or move it out of the folder")
+    return distorted, references
+
+
+def read_images(paths: list[Path], sensor_px) -> list[np.ndarray]:
+    """Images as floats in [0, 1]; all of one bit depth and of the rig's sensor size."""
+    w, h = (int(x) for x in sensor_px)
+    out, depth = [], None
+    for p in paths:
+        img = read_grey(p)
+        if img.shape != (h, w):
+            raise ValueError(f"{p} is {img.shape[1]} x {img.shape[0]} px but the rig's sensor_px is {w} x {h}: "
+                             "every image must be a full frame of the same camera")
+        if depth is None:
+            depth = (img.dtype, p)
+        elif img.dtype != depth[0]:
+            raise ValueError(f"{p} is {img.dtype} but {depth[1].name} is {depth[0]}: save every image with the same "
+                             "bit depth (8 or 16 bit)")
+        out.append(img.astype(np.float32) / _DEPTHS[img.dtype])
+    return out
+
+
+def rig_cameras(rig: dict, binning: int = 1):
+    """The rig's cameras (full sensor) from its file, and the same read out with ``binning``."""
+    c = rig["camera"]
+    w, h = (int(x) for x in c["sensor_px"])
+    if binning < 1 or w % binning or h % binning:
+        raise ValueError(f"data.binning={binning} must divide the sensor size {w} x {h} px")
+    full = arc_rig(angles_deg=[float(a) for a in rig["views"]["angles_deg"]],
+                   distance_mm=float(c["camera_to_centre_mm"]), focal_mm=float(c["focal_mm"]), width_px=w, height_px=h,
+                   pitch_um=float(c["pitch_um"]),
+                   background_behind_mm=float(c["camera_to_background_mm"]) - float(c["camera_to_centre_mm"]),
+                   f_number=float(c["f_number"]))
+    return full, [cam.binned(binning) if binning > 1 else cam for cam in full]
+
+
+def roi_mask(rig: dict, root: Path, binning: int) -> np.ndarray:
+    """(h, w) bool on the processing grid: blocks wholly inside the region of interest."""
+    w, h = (int(x) for x in rig["camera"]["sensor_px"])
+    x, y, dw, dh = (int(v) for v in rig["roi_px"])
+    if not (0 <= x and 0 <= y and dw > 0 and dh > 0 and x + dw <= w and y + dh <= h):
+        raise ValueError(f"{root / RIG_FILE}: roi_px {rig['roi_px']} (x, y, width, height) is not inside the "
+                         f"{w} x {h} px image")
+    roi = np.zeros((h, w), np.float32)
+    roi[y:y + dh, x:x + dw] = 1.0
+    return resample(roi, h // binning, w // binning) > 1 - 1e-6  # (h, w) in, (h, w) out
+
+
+def heldout_views(rig: dict, override: Optional[list], n_views: int, root: Path) -> list[int]:
+    held = override if override is not None else rig.get("heldout", [n_views - 1])
+    held = sorted({int(v) for v in held})
+    if any(not 0 <= v < n_views for v in held):
+        raise ValueError(f"held-out views {held} must be within 0..{n_views - 1} ({root / RIG_FILE})")
+    if len(held) >= n_views:
+        raise ValueError(f"all {n_views} views are held out: at least one must be trained on")
+    return held
+
+
+def sigma_prior(rig: dict, ambient: Ambient, root: Path) -> Optional[tuple]:
+    """The field's interval from the rig's ``temperature_range_K`` (with ambient, sigma = 0, inside it and a 0.05
+    margin), or None."""
+    if rig.get("temperature_range_K") is None:
+        return None
+    lo, hi = (float(t) for t in rig["temperature_range_K"])
+    if not 0 < lo < hi:
+        raise ValueError(f"{root / RIG_FILE}: temperature_range_K {rig['temperature_range_K']} must be two "
+                         "increasing positive temperatures [K]")
+    s_hot, s_cold = ambient.sigma_from_temperature(hi), ambient.sigma_from_temperature(lo)
+    return min(s_hot, 0.0) - 0.05, max(s_cold, 0.0) + 0.05
+
+
+@DATASETS.register("capture")
+def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = None, device: str = "cpu",
+            cache_dir=None) -> Scene:
+    """A capture folder -> scene of the training views, with the held-out views as ``scene.heldout``.
+
+    Args:
+        root: the capture folder. flow: a :data:`nerif.sensing.flow.FLOW` config.
+        binning: b x b sensor pixels averaged into one ray (the processing grid).
+        heldout: views never trained on (overrides the rig file's ``heldout``; default: the last view).
+    """
+    root = dataset_folder(root)
+    rig = read_rig(root)
+    FLOW.get(flow["name"])
+    distorted, references = capture_files(root, rig)
+    full, cameras = rig_cameras(rig, binning)
+    valid = roi_mask(rig, root, binning)
+    box = ProbeBox(tuple(int(n) for n in _need(rig["probe"], "shape", "rig probe")),
+                   float(_need(rig["probe"], "voxel_mm", "rig probe")))
+    amb = rig["ambient"]
+    ambient = Ambient(float(_need(amb, "T0", "rig ambient")), float(_need(amb, "n0", "rig ambient")),
+                      float(rig.get("T_max", 2000.0)))
+    held = heldout_views(rig, heldout, len(cameras), root)
+    prior = sigma_prior(rig, ambient, root)
+    _, _, pixel, starts = rays_in_box(box, cameras)  # a camera that does not see the box fails here, before the flow
+    for v, cam in enumerate(cameras):
+        if not valid.reshape(-1)[pixel[starts[v]:starts[v + 1]].numpy()].any():
+            raise ValueError(f"{cam.name}: no pixel of roi_px {rig['roi_px']} sees the probe box "
+                             f"{box.extent_mm.tolist()} mm ({root / RIG_FILE}): check the region of interest, the "
+                             "distances and the probe box")
+    images = read_images(distorted, rig["camera"]["sensor_px"])
+    refs = read_images(references, rig["camera"]["sensor_px"])
+
+    eps_images = []
+    for v, (cam, cam_full) in enumerate(zip(cameras, full)):
+        u = FLOW.build(flow, distorted=images[v], reference=refs[v])
+        u = resample(u, cam.height, cam.width)
+        d = cam.pixel_directions(torch.float64)
+        eps = displacement_to_deflection(torch.as_tensor(u.reshape(-1, 2), dtype=torch.float64), d, cam_full)
+        eps_images.append(eps.numpy().reshape(cam.height, cam.width, 3))
+        log.info("%s: displacement up to %.2f px", cam.name, float(np.nanmax(np.linalg.norm(u, axis=-1))))
+
+    def views(which: list[int], **fields) -> Scene:
+        return scene_from_images(box, ambient, [cameras[v] for v in which], [eps_images[v] for v in which],
+                                 [valid] * len(which), device=device, **fields)
+
+    train = [v for v in range(len(cameras)) if v not in held]
+    return views(train, heldout=views(held), sigma_prior=prior)
+
+
+def write_capture(scene: Scene, rig_cfg: dict, root: Path, heldout: Optional[list] = None) -> Path:
+    """Write a synthetic scene sensed realistically as a capture folder (8-bit images and ``rig.yaml``).
+
+    Args:
+        scene: a scene from :func:`nerif.data.scene.synthetic` with ``sensing=realistic`` (its images).
+        rig_cfg: the :func:`nerif.geometry.arc_rig` parameters that made its cameras.
+    """
+    if scene.sensing is None or "distorted" not in scene.sensing:
+        raise ValueError("writing a capture needs images: use data.sensing=realistic")
+    root = Path(root)
+    ref, dist = scene.sensing["reference"], scene.sensing["distorted"]
+    n, H, W = dist.shape
+    full_w = int(rig_cfg.get("width_px", 720))
+    angles = [round(float(np.degrees(np.arctan2(c.position[0], c.position[2]))), 6) for c in scene.cameras]
+    images, refs = [f"distorted_{v:02d}.png" for v in range(n)], [f"reference_{v:02d}.png" for v in range(n)]
+    for v in range(n):
+        write_png(root / images[v], dist[v])
+        write_png(root / refs[v], ref[v])
+    distance = float(rig_cfg.get("distance_mm", 800.0))
+    rig = {"format": "nerif-capture", "version": RIG_VERSION,
+           "camera": {"focal_mm": float(rig_cfg.get("focal_mm", 105.0)),
+                      "pitch_um": float(rig_cfg.get("pitch_um", 20.0)) * full_w / W, "sensor_px": [W, H],
+                      "f_number": float(rig_cfg.get("f_number", 32.0)), "camera_to_centre_mm": distance,
+                      "camera_to_background_mm": distance + float(rig_cfg.get("background_behind_mm", 800.0))},
+           "views": {"angles_deg": angles, "images": images, "references": refs},
+           "roi_px": [0, 0, W, H],
+           "probe": {"shape": [int(s) for s in scene.box.shape], "voxel_mm": float(scene.box.voxel_mm)},
+           "ambient": {"T0": float(scene.ambient.T0), "n0": float(scene.ambient.n0)},
+           "T_max": float(scene.ambient.T_max),
+           "temperature_range_K": [float(scene.ambient.T0), float(scene.ambient.T_max)],
+           "heldout": list(heldout) if heldout is not None else [n - 1]}
+    atomic_write(root / RIG_FILE, lambda t: Path(t).write_text(
+        "# nerif capture rig file (format: nerif/data/capture.py); written from a synthetic scene\n"
+        + yaml.safe_dump(rig, sort_keys=False, default_flow_style=None)))
+    return root

@@ -1,0 +1,156 @@
+"""The BOS paper's dataset format: ``transforms_{train,val,test}.json`` with per-view deflection images.
+
+Format (as in the authors' Phantom 1 data, ``../shared/data/nirbos_phantom1/README.md``):
+
+- intrinsics ``fl_x``, ``cx``, ``cy``, ``w``, ``h`` [px]; ``image_min``, ``image_max``: the deflection range the
+  16-bit images span; per frame ``transform_matrix`` (camera-to-world, OpenGL axes, lengths in units of the
+  pixel pitch; see :func:`nerif.geometry.camera_from_nerf_pose`), ``file_path`` (a 16-bit 3-channel PNG, BGR
+  on disk, RGB = world-frame eps_x, eps_y, eps_z: ``value = png / 65535 * (max - min) + min``),
+  ``mask_file_path`` (2-D mask PNG) and ``UVROI`` = ``[u, v, w, h]``, 1-based.
+- paths may be spelled with Windows backslashes.
+- the deflections are those of sigma (dimensionless), so the scene's ``T_max`` is unknown and it stays in
+  sigma units; the probe box and ambient state are not in the files and come from the config.
+
+The stored vectors are perpendicular to each camera's axis, not to each ray; the physical deflection with the
+same background displacement is their projection perpendicular to the ray (``eps - d (eps . d)``), which is
+what the scene keeps (:func:`nerif.data.scene.scene_from_images`).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import cv2
+import numpy as np
+
+from nerif.data.scene import DATASETS, Scene, dataset_folder, scene_from_images
+from nerif.geometry import ProbeBox, camera_from_nerf_pose
+from nerif.physics import Ambient
+from nerif.sensing.realistic import resample
+
+_KEYS = ("fl_x", "cx", "cy", "w", "h", "image_min", "image_max", "frames")
+
+
+def _path(root: Path, spelled: str, what: str) -> Path:
+    p = root / spelled.replace("\\", "/")
+    if not p.is_file():
+        raise FileNotFoundError(f"{what}: {p} does not exist (check the dataset folder)")
+    return p
+
+
+def read_png(path: Path, channels: int, depth=np.uint16) -> np.ndarray:
+    """A PNG exactly as stored, checked for bit depth and channel count: (H, W) or (H, W, C)."""
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ValueError(f"{path} is not a readable image")
+    have = 1 if img.ndim == 2 else img.shape[2]
+    if img.dtype != depth or have != channels:
+        raise ValueError(f"{path} is {img.dtype} with {have} channel(s); expected {np.dtype(depth).name} with "
+                         f"{channels}")
+    return img
+
+
+def read_split(root: Path, split: str) -> dict:
+    """The parsed ``transforms_<split>.json``, checked for the keys the importer needs."""
+    path = root / f"transforms_{split}.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} does not exist: data.root must be a folder with transforms_{split}.json")
+    meta = json.loads(path.read_text())
+    missing = [k for k in _KEYS if k not in meta]
+    if missing:
+        raise ValueError(f"{path} lacks {', '.join(missing)}")
+    if not meta["frames"]:
+        raise ValueError(f"{path} has no frames")
+    return meta
+
+
+def read_frame(root: Path, split: str, meta: dict, k: int, optics: dict):
+    """Frame ``k`` of a split at full resolution: its camera, its deflections (H, W, 3) as stored (world frame,
+    the json's units), its region of interest (H, W) bool and its 2-D mask (H, W) bool."""
+    w, h = int(meta["w"]), int(meta["h"])
+    lo, hi = float(meta["image_min"]), float(meta["image_max"])
+    fr = meta["frames"][k]
+    name = f"{split} view {k} ({fr['file_path']})"
+    cam = camera_from_nerf_pose(fr["transform_matrix"], float(meta["fl_x"]), w, h, float(meta["cx"]),
+                                float(meta["cy"]), name=name, **optics)
+    img = read_png(_path(root, fr["file_path"], name), 3)
+    mask = read_png(_path(root, fr["mask_file_path"], name), 3)
+    if img.shape[:2] != (h, w) or mask.shape[:2] != (h, w):
+        raise ValueError(f"{name}: images are {img.shape[1]} x {img.shape[0]} px, the json says {w} x {h}")
+    eps = cv2.cvtColor(img, cv2.COLOR_BGR2RGB).astype(np.float64) / 65535.0 * (hi - lo) + lo
+    u, v, du, dv = (int(x) for x in fr.get("UVROI", [1, 1, w, h]))
+    if not (1 <= u and 1 <= v and du > 0 and dv > 0 and u - 1 + du <= w and v - 1 + dv <= h):
+        raise ValueError(f"{name}: UVROI {fr['UVROI']} is not inside the {w} x {h} px image")
+    roi = np.zeros((h, w), bool)
+    roi[v - 1:v - 1 + dv, u - 1:u - 1 + du] = True
+    return cam, eps, roi, mask[..., 0] > 0
+
+
+def load_views(root: Path, split: str, box: ProbeBox, ambient: Ambient, optics: dict, binning: int = 1,
+               device="cpu", **fields) -> Scene:
+    """The views of one split as a scene (deflections in sigma units, the split's own 2-D masks and ROI)."""
+    meta = read_split(root, split)
+    if int(meta["w"]) % binning or int(meta["h"]) % binning:
+        raise ValueError(f"data.binning={binning} must divide the image size {meta['w']} x {meta['h']} px")
+    cameras, eps_images, valid, masks = [], [], [], []
+    for k in range(len(meta["frames"])):
+        cam, eps, roi, mask = read_frame(root, split, meta, k, optics)
+        cam = cam.binned(binning) if binning > 1 else cam
+        cameras.append(cam)
+        eps_images.append(resample(eps * ambient.delta_thre, cam.height, cam.width))  # block means
+        valid.append(resample(roi.astype(np.float32), cam.height, cam.width) > 1 - 1e-6)  # whole block in the ROI
+        masks.append(resample(mask.astype(np.float32), cam.height, cam.width) > 0)
+    return scene_from_images(box, ambient, cameras, eps_images, valid, device=device, mask_images=masks, **fields)
+
+
+def optics(pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32.0,
+           background_mm: float = 1600.0) -> dict:
+    """Camera parameters the files do not hold, for :func:`camera_from_nerf_pose` (poses in pixel pitches)."""
+    return dict(pitch_mm=pitch_um * 1e-3, length_mm=pitch_um * 1e-3, f_number=f_number,
+                background_mm=background_mm, focal_mm=focal_mm)
+
+
+@DATASETS.register("transforms")
+def transforms(root: str, probe: dict, T0: float, n0: float, T_max: Optional[float] = None,
+               heldout_split: Optional[str] = "val", binning: int = 1, sigma_prior: Optional[list] = None,
+               pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32.0,
+               background_mm: float = 1600.0, device: str = "cpu") -> Scene:
+    """Train on ``transforms_train.json``; hold out ``transforms_<heldout_split>.json`` (None: no held-out views).
+
+    Args:
+        root: the dataset folder. probe: ``shape`` (nx, ny, nz) and ``voxel_mm`` of the reconstruction grid,
+            centred on the world origin. T0, n0: ambient state. T_max: None (the files hold deflections of sigma).
+        binning: b x b pixel blocks averaged into one ray (1 = every pixel).
+        sigma_prior: (a, b) interval of sigma (the field's prior unless ``field.prior`` is set), None: the default.
+        pitch_um: pixel pitch, also the length unit of the poses. focal_mm, f_number, background_mm: lens and
+            camera-to-background distance (not in the files; used only for displacements and figures).
+    """
+    root = dataset_folder(root)
+    if binning < 1:
+        raise ValueError(f"data.binning must be at least 1, got {binning}")
+    box = ProbeBox(tuple(int(n) for n in probe["shape"]), float(probe["voxel_mm"]))
+    ambient = Ambient(float(T0), float(n0), None if T_max is None else float(T_max))
+    cams = optics(pitch_um, focal_mm, f_number, background_mm)
+    scene = load_views(root, "train", box, ambient, cams, binning, device,
+                       sigma_prior=tuple(float(x) for x in sigma_prior) if sigma_prior is not None else None)
+    if heldout_split:
+        scene.heldout = load_views(root, heldout_split, box, ambient, cams, binning, device)
+    return scene
+
+
+def reference_mask3d(root: str, box: ProbeBox, bound: float = 2.0, scale: float = 0.00054421,
+                     pitch_um: float = 20.0) -> np.ndarray:
+    """The authors' ``3Dmask.mat`` (``maskback``, indexed [x, y, z] over the cube [-bound, bound]^3 of their
+    units, nodes at both ends, ``scale`` units per pixel pitch) sampled at the centres of ``box``, as they
+    sample it (nearest lower node). Returns (nx, ny, nz) bool."""
+    from scipy.io import loadmat
+
+    path = Path(root).expanduser() / "3Dmask.mat"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} does not exist")
+    m = loadmat(str(path))["maskback"] > 0
+    units = box.centres() / (pitch_um * 1e-3) * scale  # mm -> their units
+    idx = np.clip(((units + bound) / (2 * bound) * (np.asarray(m.shape) - 1)).astype(np.int64), 0,
+                  np.asarray(m.shape) - 1)
+    return m[idx[..., 0], idx[..., 1], idx[..., 2]]

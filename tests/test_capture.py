@@ -1,0 +1,128 @@
+"""Capture folders: written from a synthetic scene, read back through optical flow, trained with a held-out
+view; every bad folder gets one clear error before the flow runs."""
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from helpers import tiny_config
+from nerif.app import run
+from nerif.data import DATASETS
+from nerif.data.capture import RIG_FILE, capture, capture_files, read_rig, write_capture
+from nerif.renderers.deflection import perpendicular
+from nerif.sensing.displacement import view_displacements
+from omegaconf import OmegaConf
+
+SMALL = ["rig.width_px=240", "rig.height_px=320", "rig.binning=8", "phantom.shape=[16,16,16]", "phantom.voxel_mm=2.0",
+         "phantom.width_mm=6.0", "data.sensing=realistic", "data.sensor.aperture_rays=8", "rig.n_cameras=7"]
+FLOW = {"name": "farneback"}
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    cfg = tiny_config(*SMALL)
+    scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device="cpu")
+    root = write_capture(scene, OmegaConf.to_container(cfg.rig, resolve=True), tmp_path_factory.mktemp("capture"))
+    return root, scene, cfg
+
+
+def test_capture_reads_back_the_scene(written):
+    root, scene, _ = written
+    rig = yaml.safe_load((root / RIG_FILE).read_text())
+    assert rig["views"]["angles_deg"] == pytest.approx([0, 27.5, 55, 82.5, 110, 137.5, 165])
+    cap = capture(str(root), FLOW, binning=8)
+    assert cap.n_views == 6 and cap.heldout.n_views == 1  # the last view held out
+    assert cap.sigma_prior == pytest.approx((-1.05, 0.05))  # from temperature_range_K = [T0, T_max]
+    # training rays: the same pixels as the synthetic scene's first six views, deflections from the 8-bit images
+    n = int(scene.view_start[6])
+    assert torch.equal(cap.pixel, scene.pixel[:n]) and torch.allclose(cap.dirs, scene.dirs[:n])
+    ref = scene.eps[:n]
+    assert float((cap.eps - ref).norm(dim=-1).pow(2).mean().sqrt()) < 0.1 * float(ref.norm(dim=-1).pow(2).mean().sqrt())
+    # and against the truth (thin-ray deflections perpendicular to the rays): within the blur of the f/32 aperture
+    cfg = tiny_config(*SMALL, "data.sensing=perpendicular")
+    ideal = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device="cpu").eps[:n]
+    rel = float((cap.eps - ideal).norm(dim=-1).pow(2).mean().sqrt() / ideal.norm(dim=-1).pow(2).mean().sqrt())
+    assert rel < 0.5, rel
+    assert float((cap.eps * cap.dirs).sum(-1).abs().max()) < 1e-9 + 1e-6 * float(cap.eps.abs().max())
+
+
+def test_train_on_a_capture_with_a_held_out_view(written, tmp_path):
+    root, _, _ = written
+    cfg = tiny_config("data=capture", f"data.root={root}", "data.binning=8", "mask=2d", "train.iterations=150",
+                      "train.eval_every=50", synthetic=False)
+    m = run(cfg, tmp_path)
+    h = capture(str(root), FLOW, binning=8).heldout
+    u_obs = view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras)
+    rms_obs = float(u_obs.norm(dim=-1).pow(2).mean().sqrt())
+    assert m["heldout_displacement_rmse_px"] < 0.6 * rms_obs, (m["heldout_displacement_rmse_px"], rms_obs)
+    assert np.isfinite(m["heldout_psnr_db"]) and np.isfinite(m["heldout_displacement_psnr_db"])
+    assert "temperature_rmse_K" not in m  # no ground truth, no temperature error claimed
+    assert (tmp_path / "heldout" / "view00.png").is_file() and (tmp_path / "reconstruction.npz").is_file()
+
+
+def _variant(written, tmp_path, edit_rig=None, edit_files=None):
+    """A copy of the written capture, with its rig file and images edited."""
+    root = written[0]
+    dst = tmp_path / "cap"
+    shutil.copytree(root, dst)
+    rig = yaml.safe_load((dst / RIG_FILE).read_text())
+    if edit_rig:
+        edit_rig(rig)
+    (dst / RIG_FILE).write_text(yaml.safe_dump(rig))
+    if edit_files:
+        edit_files(dst)
+    return str(dst)
+
+
+def _write(path, img):
+    import cv2
+    cv2.imwrite(str(path), img)
+
+
+def _read(path):
+    import cv2
+    return cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+
+
+@pytest.mark.parametrize("edit_rig, edit_files, error, message", [
+    (None, lambda d: (d / "distorted_03.png").unlink(), FileNotFoundError, "view 3 image 'distorted_03.png'"),
+    (None, lambda d: shutil.copy(d / "distorted_03.png", d / "distorted_07.png"), ValueError,
+     "distorted_07.png that rig.yaml does not list"),
+    (lambda r: r["views"]["angles_deg"].pop(), None, ValueError, "6 angles but views.images lists 7"),
+    (None, lambda d: _write(d / "distorted_02.png", _read(d / "distorted_02.png")[:-8]), ValueError,
+     "distorted_02.png is 240 x 312 px but the rig's sensor_px is 240 x 320"),
+    (None, lambda d: _write(d / "reference_01.png", _read(d / "reference_01.png").astype(np.uint16) * 257),
+     ValueError, "same bit depth"),
+    (None, lambda d: _write(d / "distorted_00.png", np.repeat(_read(d / "distorted_00.png")[..., None], 3, -1)),
+     ValueError, "colour image"),
+    (lambda r: r.update(roi_px=[200, 0, 100, 320]), None, ValueError, "roi_px .* is not inside"),
+    (lambda r: r.update(roi_px=[0, 0, 16, 16]), None, ValueError, "no pixel of roi_px .* sees the probe box"),
+    (lambda r: r.update(version=2), None, ValueError, "this nerif reads version 1"),
+    (lambda r: r["camera"].pop("pitch_um"), None, ValueError, "lacks 'pitch_um'"),
+    (lambda r: r.update(temperature_range_K=[2000, 300]), None, ValueError, "two increasing positive temperatures"),
+])
+def test_bad_capture_folders(written, tmp_path, monkeypatch, edit_rig, edit_files, error, message):
+    import nerif.data.capture as cap_mod
+
+    def no_flow(*a, **k):
+        raise AssertionError("the flow ran on a bad capture")
+
+    monkeypatch.setattr(cap_mod.FLOW, "build", no_flow)
+    with pytest.raises(error, match=message):
+        capture(_variant(written, tmp_path, edit_rig, edit_files), FLOW, binning=8)
+
+
+def test_one_shared_reference(written, tmp_path):
+    def share(rig):
+        rig["views"]["references"] = "reference_00.png"
+
+    def drop(d):
+        for k in range(1, 7):
+            (d / f"reference_{k:02d}.png").unlink()
+
+    root = _variant(written, tmp_path, share, drop)
+    distorted, references = capture_files(Path(root), read_rig(Path(root)))
+    assert len(distorted) == 7 and {p.name for p in references} == {"reference_00.png"}
