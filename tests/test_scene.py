@@ -92,3 +92,19 @@ def test_flow_failures_are_left_out_with_a_warning_never_propagated(monkeypatch,
     assert int(s.view_start[-1]) == len(s.dirs) == len(s.pixel)
     rows = s.pixel // 18
     assert bool((rows >= 16).all())  # only the lower half of each image, where the flow was finite
+
+
+def test_split_views_moves_whole_views_to_the_held_out_scene():
+    scene = DATASETS.build({"name": "synthetic", "phantom": BLOB, "rig": {"n_cameras": 4, "binning": 40},
+                            "T_max": 2000.0, "render_supersample": 1})
+    train = scene.split_views([2])
+    assert train.n_views == 3 and train.heldout.n_views == 1 and train.heldout.heldout is None
+    assert train.heldout.cameras[0] is scene.cameras[2]
+    torch.testing.assert_close(train.heldout.eps, scene.eps[scene.view_slice(2)])
+    torch.testing.assert_close(train.eps[train.view_slice(2)], scene.eps[scene.view_slice(3)])
+    torch.testing.assert_close(train.origins, scene.origins[[0, 1, 3]])
+    assert int(train.view_start[-1]) + int(train.heldout.view_start[-1]) == len(scene.dirs)
+    with pytest.raises(ValueError, match="at least one must be trained on"):
+        scene.split_views([0, 1, 2, 3])
+    with pytest.raises(ValueError, match="within 0..3"):
+        scene.split_views([4])

@@ -84,6 +84,15 @@ def test_scene_from_the_importer():
     assert int(row.min()) * 8 >= 99 and (int(row.max()) + 1) * 8 <= 99 + 1081
 
 
+def test_training_views_held_out_as_novel_views():
+    scene = transforms(str(ROOT), PROBE, 1100.0, 1.00007253, binning=8, heldout_split=None, heldout_views=[3])
+    assert scene.n_views == 11 and scene.heldout.n_views == 1
+    assert np.allclose(scene.heldout.cameras[0].position, [-565.685, 0.0, -565.685], atol=1e-3)  # 45 degrees
+    assert len(scene.mask_images) == 11
+    with pytest.raises(ValueError, match="heldout_split=null"):
+        transforms(str(ROOT), PROBE, 1100.0, 1.00007253, binning=8, heldout_views=[3])
+
+
 def test_masks_back_project_onto_the_authors_3d_mask():
     scene = load_views(ROOT, "train", BOX, Ambient(1100.0, 1.00007253, None), optics(), binning=8)
     ours = back_project(BOX, scene.cameras, scene.mask_images)

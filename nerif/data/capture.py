@@ -170,16 +170,6 @@ def roi_mask(rig: dict, root: Path, binning: int) -> np.ndarray:
     return resample(roi, h // binning, w // binning) > 1 - 1e-6  # (h, w) in, (h, w) out
 
 
-def heldout_views(rig: dict, override: Optional[list], n_views: int, root: Path) -> list[int]:
-    held = override if override is not None else rig.get("heldout", [n_views - 1])
-    held = sorted({int(v) for v in held})
-    if any(not 0 <= v < n_views for v in held):
-        raise ValueError(f"held-out views {held} must be within 0..{n_views - 1} ({root / RIG_FILE})")
-    if len(held) >= n_views:
-        raise ValueError(f"all {n_views} views are held out: at least one must be trained on")
-    return held
-
-
 def sigma_prior(rig: dict, ambient: Ambient, root: Path) -> Optional[tuple]:
     """The field's interval from the rig's ``temperature_range_K`` (with ambient, sigma = 0, inside it and a 0.05
     margin), or None."""
@@ -214,7 +204,10 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
     amb = rig["ambient"]
     ambient = Ambient(float(_need(amb, "T0", "rig ambient")), float(_need(amb, "n0", "rig ambient")),
                       float(rig.get("T_max", 2000.0)))
-    held = heldout_views(rig, heldout, len(cameras), root)
+    held = heldout if heldout is not None else rig.get("heldout", [len(cameras) - 1])
+    if any(not 0 <= int(v) < len(cameras) for v in held) or len(set(held)) >= len(cameras):
+        raise ValueError(f"held-out views {list(held)} must be within 0..{len(cameras) - 1} and leave one to train on "
+                         f"({root / RIG_FILE} heldout, or data.heldout)")
     prior = sigma_prior(rig, ambient, root)
     _, _, pixel, starts = rays_in_box(box, cameras)  # a camera that does not see the box fails here, before the flow
     for v, cam in enumerate(cameras):
@@ -234,12 +227,9 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
         eps_images.append(eps.numpy().reshape(cam.height, cam.width, 3))
         log.info("%s: displacement up to %.2f px", cam.name, float(np.nanmax(np.linalg.norm(u, axis=-1))))
 
-    def views(which: list[int], **fields) -> Scene:
-        return scene_from_images(box, ambient, [cameras[v] for v in which], [eps_images[v] for v in which],
-                                 [valid] * len(which), device=device, **fields)
-
-    train = [v for v in range(len(cameras)) if v not in held]
-    return views(train, heldout=views(held), sigma_prior=prior)
+    scene = scene_from_images(box, ambient, cameras, eps_images, [valid] * len(cameras), device=device,
+                              sigma_prior=prior)
+    return scene.split_views(held)
 
 
 def write_capture(scene: Scene, rig_cfg: dict, root: Path, heldout: Optional[list] = None) -> Path:

@@ -112,6 +112,31 @@ class Scene:
         """(N,) view index of every ray."""
         return view_index(self.view_start)
 
+    def select_views(self, views) -> "Scene":
+        """The scene of only ``views`` (indices, in that order), without held-out views or sensing record."""
+        vs = [int(v) for v in views]
+        if not vs or any(not 0 <= v < self.n_views for v in vs):
+            raise ValueError(f"views {vs} must be a non-empty list within 0..{self.n_views - 1}")
+        dev = self.dirs.device
+        idx = torch.cat([torch.arange(int(self.view_start[v]), int(self.view_start[v + 1]), device=dev) for v in vs])
+        counts = torch.tensor([int(self.view_start[v + 1] - self.view_start[v]) for v in vs], device=dev)
+        starts = torch.cat([counts.new_zeros(1), counts.cumsum(0)])
+        masks = [self.mask_images[v] for v in vs] if self.mask_images is not None else None
+        return replace(self, cameras=[self.cameras[v] for v in vs], origins=self.origins[vs], dirs=self.dirs[idx],
+                       eps=self.eps[idx], pixel=self.pixel[idx], view_start=starts, mask_images=masks, heldout=None,
+                       sensing=None)
+
+    def split_views(self, heldout) -> "Scene":
+        """The scene of every view but ``heldout``, with those as its ``heldout`` scene."""
+        held = sorted({int(v) for v in heldout})
+        if any(not 0 <= v < self.n_views for v in held):
+            raise ValueError(f"held-out views {held} must be within 0..{self.n_views - 1}")
+        if len(held) >= self.n_views:
+            raise ValueError(f"all {self.n_views} views are held out: at least one must be trained on")
+        train = self.select_views([v for v in range(self.n_views) if v not in held])
+        train.heldout = self.select_views(held)
+        return train
+
     def to(self, device) -> "Scene":
         return replace(self, origins=self.origins.to(device), dirs=self.dirs.to(device), eps=self.eps.to(device),
                        pixel=self.pixel.to(device), view_start=self.view_start.to(device),

@@ -113,10 +113,12 @@ def optics(pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32
 
 @DATASETS.register("transforms")
 def transforms(root: str, probe: dict, T0: float, n0: float, T_max: Optional[float] = None,
-               heldout_split: Optional[str] = "val", binning: int = 1, sigma_prior: Optional[list] = None,
+               heldout_split: Optional[str] = "val", heldout_views: Optional[list] = None, binning: int = 1,
+               sigma_prior: Optional[list] = None,
                pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32.0,
                background_mm: float = 1600.0, device: str = "cpu") -> Scene:
-    """Train on ``transforms_train.json``; hold out ``transforms_<heldout_split>.json`` (None: no held-out views).
+    """Train on ``transforms_train.json``; hold out ``transforms_<heldout_split>.json`` (None: no held-out views),
+    or, with ``heldout_views``, those views of the training split (novel views; ``heldout_split`` must be None).
 
     Args:
         root: the dataset folder. probe: ``shape`` (nx, ny, nz) and ``voxel_mm`` of the reconstruction grid,
@@ -134,6 +136,10 @@ def transforms(root: str, probe: dict, T0: float, n0: float, T_max: Optional[flo
     cams = optics(pitch_um, focal_mm, f_number, background_mm)
     scene = load_views(root, "train", box, ambient, cams, binning, device,
                        sigma_prior=tuple(float(x) for x in sigma_prior) if sigma_prior is not None else None)
+    if heldout_views is not None:
+        if heldout_split:
+            raise ValueError("data.heldout_views holds out training views: set data.heldout_split=null with it")
+        return scene.split_views(heldout_views)
     if heldout_split:
         scene.heldout = load_views(root, heldout_split, box, ambient, cams, binning, device)
     return scene
