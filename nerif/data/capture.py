@@ -184,8 +184,7 @@ def sigma_prior(rig: dict, ambient: Ambient, root: Path) -> Optional[tuple]:
 
 
 @DATASETS.register("capture")
-def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = None, device: str = "cpu",
-            cache_dir=None) -> Scene:
+def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = None, device: str = "cpu") -> Scene:
     """A capture folder -> scene of the training views, with the held-out views as ``scene.heldout``.
 
     Args:
