@@ -126,11 +126,7 @@ def write_heldout(trainer, scene, out_dir: Path) -> dict:
     pred_all = view_displacements(pred, h.dirs, h.ray_views(), h.cameras) if physical else pred
     for v, cam in enumerate(h.cameras):
         sl = h.view_slice(v)
-        imgs = []
-        for vec in (obs_all[sl], pred_all[sl]):
-            img = np.full((cam.height * cam.width, vec.shape[-1]), np.nan)
-            img[h.pixel[sl].cpu().numpy()] = vec.detach().cpu().double().numpy()
-            imgs.append(img.reshape(cam.height, cam.width, -1))
+        imgs = [h.view_image(v, vec[sl].detach().cpu().double().numpy(), np.nan) for vec in (obs_all, pred_all)]
         save_figure(heldout_figure(*imgs, unit="px" if physical else "sigma", title=f"held out: {cam.name}"),
                     out_dir / "heldout" / f"view{v:02d}.png")
     return trainer.heldout_errors(torch.arange(len(h.dirs), device=h.dirs.device), pred)

@@ -158,10 +158,16 @@ class Trainer(IterativeSolver):
         return self.render(o, d, operators)
 
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
-        """Deflections [rad] by the operator training fits (discrete when it is trained on)."""
-        trained = [n for n, w in self.weights.items() if w > 0]
-        op = "discrete" if "discrete" in trained else trained[0]
+        """Deflections [rad] by the operator training fits (:attr:`fitted_operator`)."""
+        op = self.fitted_operator
         return self.render(origins, dirs, (op,))[op]
+
+    @property
+    def fitted_operator(self) -> str:
+        """The gradient operator whose deflections are reported: discrete when it is trained on, else the first
+        trained one."""
+        trained = [n for n, w in self.weights.items() if w > 0]
+        return "discrete" if "discrete" in trained else trained[0]
 
     def evaluate(self) -> dict:
         """Metrics now: temperature/sigma errors on the grid (when the truth is known), deflection errors."""
@@ -170,8 +176,7 @@ class Trainer(IterativeSolver):
         obs = self.scene.eps[self._eval_index]
         for n, e in eps.items():
             m[f"deflection_rmse_{n}"] = deflection_rmse(e, obs)
-        trained = [n for n, w in self.weights.items() if w > 0]
-        m["deflection_rmse"] = m[f"deflection_rmse_{'discrete' if 'discrete' in trained else trained[0]}"]
+        m["deflection_rmse"] = m[f"deflection_rmse_{self.fitted_operator}"]
         m.update(self.heldout_errors())
         self.history.append(m)
         return m

@@ -47,7 +47,8 @@ import numpy as np
 import torch
 import yaml
 
-from nerif.data.scene import DATASETS, Scene, dataset_folder, rays_in_box, scene_from_images
+from nerif.data.scene import (DATASETS, Scene, blocks_inside, dataset_folder, heldout_views, rays_in_box,
+                              region_of_interest, scene_from_images)
 from nerif.export import atomic_write, write_png
 from nerif.geometry import ProbeBox, arc_rig
 from nerif.physics import Ambient
@@ -162,12 +163,8 @@ def roi_mask(rig: dict, root: Path, binning: int) -> np.ndarray:
     """(h, w) bool on the processing grid: blocks wholly inside the region of interest."""
     w, h = (int(x) for x in rig["camera"]["sensor_px"])
     x, y, dw, dh = (int(v) for v in rig["roi_px"])
-    if not (0 <= x and 0 <= y and dw > 0 and dh > 0 and x + dw <= w and y + dh <= h):
-        raise ValueError(f"{root / RIG_FILE}: roi_px {rig['roi_px']} (x, y, width, height) is not inside the "
-                         f"{w} x {h} px image")
-    roi = np.zeros((h, w), np.float32)
-    roi[y:y + dh, x:x + dw] = 1.0
-    return resample(roi, h // binning, w // binning) > 1 - 1e-6  # (h, w) in, (h, w) out
+    roi = region_of_interest(x, y, dw, dh, w, h, f"{root / RIG_FILE}: roi_px {rig['roi_px']} (x, y, width, height)")
+    return blocks_inside(roi, h // binning, w // binning)
 
 
 def sigma_prior(rig: dict, ambient: Ambient, root: Path) -> Optional[tuple]:
@@ -203,10 +200,7 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
     amb = rig["ambient"]
     ambient = Ambient(float(_need(amb, "T0", "rig ambient")), float(_need(amb, "n0", "rig ambient")),
                       float(rig.get("T_max", 2000.0)))
-    held = heldout if heldout is not None else rig.get("heldout", [len(cameras) - 1])
-    if any(not 0 <= int(v) < len(cameras) for v in held) or len(set(held)) >= len(cameras):
-        raise ValueError(f"held-out views {list(held)} must be within 0..{len(cameras) - 1} and leave one to train on "
-                         f"({root / RIG_FILE} heldout, or data.heldout)")
+    held = heldout_views(heldout if heldout is not None else rig.get("heldout", [len(cameras) - 1]), len(cameras))
     prior = sigma_prior(rig, ambient, root)
     _, _, pixel, starts = rays_in_box(box, cameras)  # a camera that does not see the box fails here, before the flow
     for v, cam in enumerate(cameras):

@@ -21,7 +21,7 @@ from nerif.registry import Registry
 from nerif.renderers.deflection import perpendicular
 from nerif.renderers.voxel import voxel_deflection
 from nerif.sensing.flow import finite_or_masked
-from nerif.sensing.realistic import realistic
+from nerif.sensing.realistic import realistic, resample
 
 log = logging.getLogger(__name__)
 DATASETS = Registry("dataset")
@@ -128,14 +128,18 @@ class Scene:
 
     def split_views(self, heldout) -> "Scene":
         """The scene of every view but ``heldout``, with those as its ``heldout`` scene."""
-        held = sorted({int(v) for v in heldout})
-        if any(not 0 <= v < self.n_views for v in held):
-            raise ValueError(f"held-out views {held} must be within 0..{self.n_views - 1}")
-        if len(held) >= self.n_views:
-            raise ValueError(f"all {self.n_views} views are held out: at least one must be trained on")
+        held = heldout_views(heldout, self.n_views)
         train = self.select_views([v for v in range(self.n_views) if v not in held])
         train.heldout = self.select_views(held)
         return train
+
+    def view_image(self, view: int, values: np.ndarray, fill: float = 0.0) -> np.ndarray:
+        """Per-ray values (R_view,) or (R_view, C) of ``view`` on its camera's pixel grid, ``fill`` where it has no
+        ray: (height, width) or (height, width, C)."""
+        cam, values = self.cameras[view], np.asarray(values)
+        img = np.full((cam.height * cam.width,) + values.shape[1:], fill, dtype=np.float64)
+        img[self.pixel[self.view_slice(view)].cpu().numpy()] = values
+        return img.reshape((cam.height, cam.width) + values.shape[1:])
 
     def to(self, device) -> "Scene":
         return replace(self, origins=self.origins.to(device), dirs=self.dirs.to(device), eps=self.eps.to(device),
@@ -167,6 +171,31 @@ def scene_from_images(box: ProbeBox, ambient: Ambient, cameras: list[Camera], ep
                              f"{box.extent_mm.tolist()} mm: check the region of interest, the pose and the probe box")
     return Scene(box, ambient, cameras, origins, dirs, perpendicular(eps, dirs), pixel, view_start,
                  perpendicular_only=True, **fields)
+
+
+def heldout_views(heldout, n_views: int) -> list[int]:
+    """Sorted distinct held-out view indices, checked: within range and leaving a view to train on."""
+    held = sorted({int(v) for v in heldout})
+    if any(not 0 <= v < n_views for v in held):
+        raise ValueError(f"held-out views {held} must be within 0..{n_views - 1}")
+    if len(held) >= n_views:
+        raise ValueError(f"all {n_views} views are held out: at least one must be trained on")
+    return held
+
+
+def region_of_interest(x: int, y: int, w: int, h: int, width: int, height: int, what: str) -> np.ndarray:
+    """(height, width) bool, True on the pixels [x, x + w) x [y, y + h) (0-based); a clear error naming ``what``
+    when the rectangle is not inside the image."""
+    if not (0 <= x and 0 <= y and w > 0 and h > 0 and x + w <= width and y + h <= height):
+        raise ValueError(f"{what} is not inside the {width} x {height} px image")
+    roi = np.zeros((height, width), bool)
+    roi[y:y + h, x:x + w] = True
+    return roi
+
+
+def blocks_inside(region: np.ndarray, height: int, width: int) -> np.ndarray:
+    """A (H, W) bool region -> (height, width) bool on a coarser grid of the same sensor: blocks wholly inside."""
+    return resample(region.astype(np.float32), height, width) > 1 - 1e-6
 
 
 def dataset_folder(root) -> Path:

@@ -24,7 +24,8 @@ from typing import Optional
 import cv2
 import numpy as np
 
-from nerif.data.scene import DATASETS, Scene, dataset_folder, scene_from_images
+from nerif.data.scene import (DATASETS, Scene, blocks_inside, dataset_folder, region_of_interest,
+                              scene_from_images)
 from nerif.geometry import ProbeBox, camera_from_nerf_pose
 from nerif.physics import Ambient
 from nerif.sensing.realistic import resample
@@ -79,11 +80,8 @@ def read_frame(root: Path, split: str, meta: dict, k: int, optics: dict):
     if img.shape[:2] != (h, w) or mask.shape[:2] != (h, w):
         raise ValueError(f"{name}: images are {img.shape[1]} x {img.shape[0]} px, the json says {w} x {h}")
     eps = cv2.cvtColor(img, cv2.COLOR_BGR2RGB).astype(np.float64) / 65535.0 * (hi - lo) + lo
-    u, v, du, dv = (int(x) for x in fr.get("UVROI", [1, 1, w, h]))
-    if not (1 <= u and 1 <= v and du > 0 and dv > 0 and u - 1 + du <= w and v - 1 + dv <= h):
-        raise ValueError(f"{name}: UVROI {fr['UVROI']} is not inside the {w} x {h} px image")
-    roi = np.zeros((h, w), bool)
-    roi[v - 1:v - 1 + dv, u - 1:u - 1 + du] = True
+    u, v, du, dv = (int(x) for x in fr.get("UVROI", [1, 1, w, h]))  # 1-based
+    roi = region_of_interest(u - 1, v - 1, du, dv, w, h, f"{name}: UVROI {fr.get('UVROI')} (1-based u, v, w, h)")
     return cam, eps, roi, mask[..., 0] > 0
 
 
@@ -99,7 +97,7 @@ def load_views(root: Path, split: str, box: ProbeBox, ambient: Ambient, optics: 
         cam = cam.binned(binning) if binning > 1 else cam
         cameras.append(cam)
         eps_images.append(resample(eps * ambient.delta_thre, cam.height, cam.width))  # block means
-        valid.append(resample(roi.astype(np.float32), cam.height, cam.width) > 1 - 1e-6)  # whole block in the ROI
+        valid.append(blocks_inside(roi, cam.height, cam.width))
         masks.append(resample(mask.astype(np.float32), cam.height, cam.width) > 0)
     return scene_from_images(box, ambient, cameras, eps_images, valid, device=device, mask_images=masks, **fields)
 

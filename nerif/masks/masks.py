@@ -21,13 +21,10 @@ def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2) -> lis
     """
     out = []
     for v, cam in enumerate(scene.cameras):
-        sl = scene.view_slice(v)
-        mag2 = (scene.eps[sl].double() ** 2).sum(-1).cpu().numpy()
-        img = np.zeros(cam.height * cam.width, dtype=np.float64)
+        mag2 = (scene.eps[scene.view_slice(v)].double() ** 2).sum(-1).cpu().numpy()
         peak = mag2.max() if mag2.size else 0.0
-        if peak > 0 and np.isfinite(peak):
-            img[scene.pixel[sl].cpu().numpy()] = mag2 / peak
-        m = (img.reshape(cam.height, cam.width) > threshold).astype(np.uint8)
+        norm = mag2 / peak if peak > 0 and np.isfinite(peak) else np.zeros_like(mag2)
+        m = (scene.view_image(v, norm) > threshold).astype(np.uint8)
         if radius_px > 0:
             disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
             m = cv2.dilate(m, disc)
