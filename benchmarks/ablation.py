@@ -10,7 +10,6 @@ the other, so ratios between cells are measured side by side. Writes ``ablation.
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import time
 from pathlib import Path
@@ -19,8 +18,8 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from nerif.app import run
-from nerif.export import atomic_write, write_json
-from nerif.summary import COLUMNS, write_tables
+from nerif.io.export import atomic_write, write_json
+from nerif.io.summary import COLUMNS, write_tables
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 DEFAULT_CELLS = [f"encoder={e} grad={g}" for e in ("none", "frequency", "hash") for g in ("auto", "discrete", "hybrid")]

@@ -13,13 +13,12 @@ recorded) and the best is reported. Writes ``accuracy_time.json``, ``accuracy_ti
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from ablation import header, run_cells
 
-from nerif.export import atomic_write, write_json
-from nerif.plots import plt, save_figure
+from nerif.io.export import atomic_write, write_json
+from nerif.io.plots import plt, save_figure
 
 # Measured displacements carry no along-ray component; on Phantom 5, which the box cuts, the 3-D gate then
 # costs the absolute level (190 K vs 16 K with mask=2d, benchmarks/RESULTS.md): that scene uses 2-D masks.

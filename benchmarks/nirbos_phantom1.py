@@ -17,9 +17,9 @@ import numpy as np
 
 from ablation import header, run_cells
 from nerif.data.transforms import reference_mask3d
-from nerif.export import write_json
+from nerif.io.export import write_json
 from nerif.geometry import ProbeBox
-from nerif.summary import write_tables
+from nerif.io.summary import write_tables
 
 ROOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "nirbos_phantom1"
 SETTINGS = ["data=transforms", f"data.root={ROOT}", "data.binning=4", "sampler.samples_per_ray=64",

@@ -7,12 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
+from nerif.configs import group
 from nerif.data import DATASETS
-from nerif.export import write_json, write_npz, write_png, write_vti
+from nerif.io.export import write_json, write_npz, write_png, write_vti
+from nerif.io.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
 from nerif.masks import MASKS
-from nerif.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
 from nerif.sensing.displacement import view_displacements
 from nerif.solvers import SOLVERS
 
@@ -34,18 +35,18 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     out_dir = Path(out_dir)
     device = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
-    # every check that can fail happens here, before any training
-    make_solver = SOLVERS.get(cfg.solver.name)(cfg)
-    scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device=str(device))
-    masks = MASKS.build(cfg.mask, scene=scene)
-    trainer = make_solver(scene, masks)
+    # every check that can fail happens here, before any training; the solver checks its settings before any data
+    solver = SOLVERS.build(group(cfg, "solver"))
+    scene = DATASETS.build(group(cfg, "data"), device=str(device))
+    masks = MASKS.build(group(cfg, "mask"), scene=scene)
+    solver.setup(scene, masks)
     tc = cfg.train
     write_masks(masks, scene, out_dir)
     write_sensing(scene, out_dir)
     checkpoint = out_dir / "checkpoint.pt"
     if tc.resume:
-        trainer.load(Path(tc.resume))
-        log.info("resumed from %s at iteration %d", tc.resume, trainer.iteration)
+        solver.load(Path(tc.resume))
+        log.info("resumed from %s at iteration %d", tc.resume, solver.iteration)
     setup_s = time.perf_counter() - t_start
 
     from torch.utils.tensorboard import SummaryWriter
@@ -64,19 +65,19 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
         for k, v in m.items():
             if k != "iteration":
                 writer.add_scalar(f"eval/{k}", v, it)
-        if it % tc.image_every == 0 or it == trainer.iterations:
-            writer.add_figure("slices", volume_slices(trainer.reconstruction(), scene, f"iteration {it}"), it)
+        if it % tc.image_every == 0 or it == solver.iterations:
+            writer.add_figure("slices", volume_slices(solver.reconstruction(), scene, f"iteration {it}"), it)
         writer.flush()
 
     log.info("%s: %d views, %d rays; %s, device %s", cfg.data.name, scene.n_views, len(scene.dirs),
-             ", ".join(f"{k} {v}" for k, v in trainer.labels.items()), device)
+             ", ".join(f"{k} {v}" for k, v in solver.labels.items()), device)
     try:
-        trainer.fit(eval_every=cfg.solver.eval_every, checkpoint_every=tc.checkpoint_every, checkpoint=checkpoint,
+        solver.fit(checkpoint_every=tc.checkpoint_every, checkpoint=checkpoint,
                     on_eval=on_eval, on_step=on_step, progress=tc.progress)
     finally:
         writer.close()
 
-    metrics = write_outputs(trainer, scene, cfg, out_dir, losses)
+    metrics = write_outputs(solver, scene, cfg, out_dir, losses)
     metrics.update(setup_time_s=setup_s, device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
     if device.type == "cuda":
         metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
@@ -116,11 +117,11 @@ def volume_slices(sigma: np.ndarray, scene, title: str):
     return slice_figure(scene.ambient.temperature_from_sigma(sigma), scene.box, scene.truth_T, title)
 
 
-def write_heldout(trainer, scene, out_dir: Path) -> dict:
+def write_heldout(solver, scene, out_dir: Path) -> dict:
     """Predictions on every held-out ray: their errors, and per view a figure of observed, predicted and
     difference (image displacements [px] where deflections are physical, else deflections)."""
     h = scene.heldout
-    pred = trainer.heldout_predictions()
+    pred = solver.heldout_predictions()
     physical = h.ambient.temperature_known
     obs_all = view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras) if physical else h.eps
     pred_all = view_displacements(pred, h.dirs, h.ray_views(), h.cameras) if physical else pred
@@ -129,13 +130,13 @@ def write_heldout(trainer, scene, out_dir: Path) -> dict:
         imgs = [h.view_image(v, vec[sl].detach().cpu().double().numpy(), np.nan) for vec in (obs_all, pred_all)]
         save_figure(heldout_figure(*imgs, unit="px" if physical else "sigma", title=f"held out: {cam.name}"),
                     out_dir / "heldout" / f"view{v:02d}.png")
-    return trainer.heldout_errors(torch.arange(len(h.dirs), device=h.dirs.device), pred)
+    return solver.heldout_errors(torch.arange(len(h.dirs), device=h.dirs.device), pred)
 
 
-def write_outputs(trainer, scene, cfg: DictConfig, out_dir: Path, losses) -> dict:
+def write_outputs(solver, scene, cfg: DictConfig, out_dir: Path, losses) -> dict:
     """Volumes (.npz, .vti), slice and curve PNGs, held-out figures, and the metrics of the final state."""
     amb, box = scene.ambient, scene.box
-    sigma = trainer.reconstruction()
+    sigma = solver.reconstruction()
     vols = {"sigma": sigma}
     if amb.temperature_known:
         vols.update(T=amb.temperature_from_sigma(sigma), n=amb.n_from_sigma(sigma), delta=sigma * amb.delta_thre)
@@ -145,19 +146,19 @@ def write_outputs(trainer, scene, cfg: DictConfig, out_dir: Path, losses) -> dic
     write_npz(out_dir / "reconstruction.npz", voxel_mm=box.voxel_mm, origin_mm=np.asarray(origin), T0=amb.T0, n0=amb.n0,
               delta_thre=amb.delta_thre, **vols)
     write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, **vols)
-    label = " + ".join(str(v) for k, v in trainer.labels.items() if k != "lam")
-    save_figure(volume_slices(sigma, scene, f"{label}, {trainer.iteration} iterations"), out_dir / "slices.png")
-    save_figure(curves_figure(trainer.history, losses), out_dir / "curves.png")
-    final = dict(trainer.history[-1]) if trainer.history else trainer.evaluate()
+    label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
+    save_figure(volume_slices(sigma, scene, f"{label}, {solver.iteration} iterations"), out_dir / "slices.png")
+    save_figure(curves_figure(solver.history, losses), out_dir / "curves.png")
+    final = dict(solver.history[-1]) if solver.history else solver.evaluate()
     final.pop("iteration", None)
     if scene.heldout is not None:
-        final.update(write_heldout(trainer, scene, out_dir))  # every held-out ray, not the evaluation subset
+        final.update(write_heldout(solver, scene, out_dir))  # every held-out ray, not the evaluation subset
     if not amb.temperature_known:
         final["deflection_unit"] = "sigma (the data are deflections of sigma; no temperature is inferred)"
-    final.update(trainer.timing())
-    final["wall_time_s"] = trainer.train_seconds
-    final["history"] = trainer.history
-    final.update(trainer.labels)
+    final.update(solver.timing())
+    final["wall_time_s"] = solver.train_seconds
+    final["history"] = solver.history
+    final.update(solver.labels)
     if scene.sensing is not None:
         final["displacement_rmse_px"] = float(scene.sensing["displacement_rmse_px"])
         final["circle_of_confusion_px"] = float(scene.sensing["circle_of_confusion_px"])

@@ -7,7 +7,6 @@ from typing import Callable, Optional
 import torch
 from torch import nn
 
-from nerif.encoders import ENCODERS
 from nerif.geometry import ProbeBox
 
 
@@ -70,8 +69,8 @@ class NeuralField(nn.Module):
 DEFAULT_PRIOR = (-1.05, 0.05)  # hot gas in cooler ambient: sigma from -1 (T_max) to slightly above 0
 
 
-def build_field(cfg, box: ProbeBox, gate=None, data_prior=None) -> NeuralField:
-    """Field from the ``encoder`` and ``field`` config groups. Its prior interval: ``field.prior`` when set, else
-    the one the data give (``data_prior``), else :data:`DEFAULT_PRIOR`."""
-    prior = cfg.field.prior if cfg.field.prior is not None else (data_prior or DEFAULT_PRIOR)
-    return NeuralField(ENCODERS.build(cfg.encoder), box, hidden=tuple(cfg.field.hidden), prior=tuple(prior), gate=gate)
+def prior_interval(configured=None, data_prior=None) -> tuple[float, float]:
+    """The field's prior interval: ``configured`` (``field.prior``) when set, else the one the data give
+    (``data_prior``), else :data:`DEFAULT_PRIOR`."""
+    prior = configured if configured is not None else (data_prior or DEFAULT_PRIOR)
+    return float(prior[0]), float(prior[1])

@@ -1,19 +1,41 @@
-"""Name -> class registries: every interchangeable component is chosen by name from its config group."""
+"""Name -> component registries: every interchangeable part is chosen by name from its config group.
+
+A registry belongs to a package and holds what the modules of that package register. Its entries are found by
+importing every module of the package the first time a name is looked up (and again when a name is missing),
+so adding a variant is one module that registers it plus one yaml in ``conf/<group>/``, with no other edit.
+
+Every component is built the same way, from its config group (a mapping whose ``name`` picks the entry; the
+other keys are its keyword arguments) plus the run-time objects it needs::
+
+    ENCODERS.build(cfg.encoder)
+    MASKS.build(cfg.mask, scene=scene)
+"""
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping
+import importlib
+import pkgutil
+from typing import Any, Callable, Mapping, Optional
+
+
+class UnknownComponent(ValueError):
+    """A config names a component that no module registers (bad input, reported as one sentence)."""
 
 
 class Registry:
     """A family of components (encoders, samplers, ...) built by name.
 
-    >>> ENCODERS = Registry("encoder")
+    Args:
+        family: what the entries are, for messages (``"encoder"``).
+        package: the package whose modules register the entries (``"nerif.encoders"``); None: only what is
+            registered explicitly.
+
+    >>> ENCODERS = Registry("encoder", package="nerif.encoders")
     >>> @ENCODERS.register("none")
     ... class Identity: ...
     """
 
-    def __init__(self, family: str):
-        self.family = family
+    def __init__(self, family: str, package: Optional[str] = None):
+        self.family, self.package = family, package
         self._entries: dict[str, Callable[..., Any]] = {}
 
     def register(self, name: str):
@@ -25,23 +47,37 @@ class Registry:
 
         return decorator
 
+    def discover(self) -> None:
+        """Import every module of the registry's package (each registers its entries on import)."""
+        if self.package is None:
+            return
+        pkg = importlib.import_module(self.package)
+        for info in pkgutil.walk_packages(pkg.__path__, prefix=f"{self.package}."):
+            importlib.import_module(info.name)
+
     def names(self) -> list[str]:
+        self.discover()
         return sorted(self._entries)
 
     def get(self, name: str) -> Callable[..., Any]:
         if name not in self._entries:
-            raise KeyError(
+            self.discover()
+        if name not in self._entries:
+            raise UnknownComponent(
                 f"unknown {self.family} '{name}'; registered {self.family}s: {', '.join(self.names())}"
             )
         return self._entries[name]
 
     def build(self, cfg: Mapping[str, Any], **extra: Any) -> Any:
-        """Build from a config mapping whose `name` picks the entry; the other keys are keyword arguments."""
+        """Build from a config mapping whose ``name`` picks the entry; the other keys are keyword arguments, and
+        ``extra`` the run-time objects the entry needs (a scene, an image, ...)."""
         params = dict(cfg)
         name = params.pop("name", None)
         if name is None:
-            raise KeyError(f"the {self.family} config has no 'name'; choose one of: {', '.join(self.names())}")
+            raise UnknownComponent(f"the {self.family} config has no 'name'; choose one of: {', '.join(self.names())}")
         return self.get(name)(**params, **extra)
 
     def __contains__(self, name: str) -> bool:
+        if name not in self._entries:
+            self.discover()
         return name in self._entries

@@ -11,13 +11,9 @@ import argparse
 import logging
 from pathlib import Path
 
-from hydra import compose, initialize_config_dir
-from omegaconf import OmegaConf
-
+from nerif.configs import compose, group
 from nerif.data import DATASETS
 from nerif.data.capture import write_capture
-
-CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
 def main(argv=None) -> Path:
@@ -26,10 +22,9 @@ def main(argv=None) -> Path:
     ap.add_argument("overrides", nargs="*", help="config overrides of the synthetic scene (data.sensing is realistic)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    with initialize_config_dir(config_dir=str(CONF), version_base=None):
-        cfg = compose("config", overrides=["data=synthetic", "data.sensing=realistic"] + list(args.overrides))
-    scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device="cpu")
-    root = write_capture(scene, OmegaConf.to_container(cfg.rig, resolve=True), Path(args.path))
+    cfg = compose(["data=synthetic", "data.sensing=realistic"] + list(args.overrides))
+    scene = DATASETS.build(group(cfg, "data"), device="cpu")
+    root = write_capture(scene, Path(args.path))
     print(f"capture of {scene.n_views} views written to {root}; reconstruct it with: "
           f"python -m nerif data=capture data.root={root}")
     return root

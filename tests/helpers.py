@@ -1,11 +1,10 @@
-"""A tiny scene that trains in seconds on a CPU."""
-from hydra import compose, initialize_config_dir
-from pathlib import Path
+"""A tiny scene that trains in seconds on a CPU, and building a solver from a config as the app does."""
+from nerif.configs import compose, group
+from nerif.solvers import SOLVERS
 
-CONF = str(Path(__file__).resolve().parents[1] / "conf")
 TINY = ["device=cpu", "phantom=gaussian_blob", "phantom.shape=[16,16,16]", "phantom.voxel_mm=3.0",
         "phantom.width_mm=7.0", "rig.n_cameras=6", "rig.binning=40", "sampler.samples_per_ray=16",
-        "train.iterations=20", "train.rays_per_view=64", "train.eval_every=10", "train.eval_rays_per_view=32",
+        "train.iterations=20", "train.rays_per_view=64", "train.eval_every=10", "metrics.eval_rays_per_view=32",
         "train.checkpoint_every=10", "train.progress=false", "data.cache_dir=null", "data.render_supersample=1",
         "field.finest_resolution=32", "field.log2_table_size=12"]
 
@@ -13,5 +12,11 @@ TINY = ["device=cpu", "phantom=gaussian_blob", "phantom.shape=[16,16,16]", "phan
 def tiny_config(*overrides, synthetic: bool = True):
     """The tiny scene's config; ``synthetic=False`` keeps only its solver settings (for another dataset)."""
     base = TINY if synthetic else [o for o in TINY if not o.startswith(("phantom", "rig.", "data."))]
-    with initialize_config_dir(config_dir=CONF, version_base=None):
-        return compose("config", overrides=base + list(overrides))
+    return compose(base + list(overrides))
+
+
+def solver(cfg, scene, masks=None):
+    """The configured solver, set up on ``scene`` (with ``masks``, default: none)."""
+    from nerif.masks import Masks
+
+    return SOLVERS.build(group(cfg, "solver")).setup(scene, masks if masks is not None else Masks())

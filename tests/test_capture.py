@@ -8,11 +8,10 @@ import pytest
 import torch
 import yaml
 
-from helpers import tiny_config
+from tests.helpers import tiny_config
 from nerif.app import run
 from nerif.data import DATASETS
 from nerif.data.capture import RIG_FILE, capture, capture_files, read_rig, write_capture
-from nerif.renderers.deflection import perpendicular
 from nerif.sensing.displacement import view_displacements
 from omegaconf import OmegaConf
 
@@ -25,7 +24,7 @@ FLOW = {"name": "farneback"}
 def written(tmp_path_factory):
     cfg = tiny_config(*SMALL)
     scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device="cpu")
-    root = write_capture(scene, OmegaConf.to_container(cfg.rig, resolve=True), tmp_path_factory.mktemp("capture"))
+    root = write_capture(scene, tmp_path_factory.mktemp("capture"))
     return root, scene, cfg
 
 

@@ -6,7 +6,7 @@ from nerif.sensing.displacement import deflection_to_displacement, displacement_
 
 
 def test_central_ray_displacement_matches_the_hand_computation():
-    cam = arc_rig()[0]  # at +z, looking along -z: right = +x, down = -y
+    cam = arc_rig(binning=1)[0]  # at +z, looking along -z: right = +x, down = -y
     d = torch.tensor([[0.0, 0.0, -1.0]], dtype=torch.float64)
     eps = torch.tensor([[1e-4, 2e-4, 0.0]], dtype=torch.float64)
     u = deflection_to_displacement(eps, d, cam)
@@ -28,7 +28,7 @@ def test_deflection_displacement_round_trip_is_exact(view):
 def test_view_displacements_are_in_sensor_pixels_whatever_the_binning():
     from nerif.sensing.displacement import view_displacements
 
-    full, binned = arc_rig(n_cameras=2), arc_rig(n_cameras=2, binning=8)
+    full, binned = arc_rig(n_cameras=2, binning=1), arc_rig(n_cameras=2, binning=8)
     d = torch.stack([full[0].pixel_directions()[1000], full[1].pixel_directions()[5000]])
     eps = torch.tensor([[1e-4, 2e-4, 0.0], [0.0, -1e-4, 3e-5]], dtype=torch.float64)
     views = torch.tensor([0, 1])

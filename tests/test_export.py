@@ -5,7 +5,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from nerif.export import atomic_write, write_json, write_npz, write_vti
+from nerif.io.export import atomic_write, write_json, write_vti
 
 
 def test_vti_holds_the_volume_x_fastest(tmp_path):
@@ -35,17 +35,11 @@ def test_atomic_write_leaves_the_old_file_on_failure(tmp_path):
     assert [q.name for q in tmp_path.iterdir()] == ["metrics.json"]
 
 
-def test_npz_round_trip(tmp_path):
-    write_npz(tmp_path / "r.npz", T=np.ones((2, 2, 2)), voxel_mm=0.5)
-    z = np.load(tmp_path / "r.npz")
-    assert z["T"].shape == (2, 2, 2) and float(z["voxel_mm"]) == 0.5
-
-
 def test_written_files_get_the_usual_permissions(tmp_path):
     import os
     import stat
 
-    from nerif.export import atomic_write
+    from nerif.io.export import atomic_write
 
     p = atomic_write(tmp_path / "a.txt", lambda t: open(t, "w").write("x"))
     mask = os.umask(0)

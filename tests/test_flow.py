@@ -1,10 +1,9 @@
-import logging
 
 import numpy as np
 import pytest
 import torch
 
-from nerif.sensing.flow import FLOW, finite_or_masked
+from nerif.sensing.flow import FLOW
 from nerif.sensing.imaging import diffraction_blur, warp
 from nerif.sensing.patterns import PATTERNS
 
@@ -23,15 +22,6 @@ def test_optical_flow_recovers_a_known_smooth_displacement(flow, pattern):
     rms = float(np.sqrt((err**2).sum(-1).mean()))
     assert rms < 0.1, rms
     assert float(np.sqrt((u.numpy() ** 2).sum(-1).mean())) > 5 * rms  # the displacement itself is well above it
-
-
-def test_non_finite_estimates_are_masked_with_a_warning(caplog):
-    u = np.zeros((4, 5, 2), np.float32)
-    u[1, 2, 0], u[3, 4, 1] = np.nan, np.inf
-    with caplog.at_level(logging.WARNING):
-        ok = finite_or_masked(u, "view 3")
-    assert ok.sum() == 18 and not ok[1, 2] and not ok[3, 4]
-    assert "view 3: 2 of 20 displacement estimates are not finite" in caplog.text
 
 
 def test_unknown_dis_preset_is_named():

@@ -1,8 +1,8 @@
 import torch
 
 from nerif.data.phantoms import gaussian_blob
-from nerif.geometry import ProbeBox, arc_rig, sample_volume
-from nerif.data.scene import rays_in_box
+from nerif.geometry import arc_rig, sample_volume
+from nerif.geometry import rays_in_box
 from nerif.renderers import SAMPLERS, render_deflections
 from nerif.renderers.occupancy import pack_bits, unpack_bits
 

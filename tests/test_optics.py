@@ -10,7 +10,7 @@ from nerif.sensing.realistic import aperture_deflection
 
 
 def test_circle_of_confusion_of_the_paper_rig_matches_the_hand_computation():
-    cam = arc_rig()[4]  # 105 mm lens, f/32, probe 800 mm away, background 1600 mm, 20 um pixels
+    cam = arc_rig(binning=1)[4]  # 105 mm lens, f/32, probe 800 mm away, background 1600 mm, 20 um pixels
     # by hand: s_i = 1 / (1/105 - 1/1600) = 112.37458 mm, M = s_i / 1600 = 0.0702341, aperture 105/32 = 3.28125 mm,
     # d_geo = 3.28125 * 0.0702341 * 800 / 800 = 0.230456 mm; d_diff = 2.44 * 0.5e-3 * 32 * 1.0702341 = 0.0417819 mm
     c = circle_of_confusion(cam)

@@ -1,8 +1,8 @@
 import pytest
 import torch
 
-from nerif.baselines.projector import PROJECTORS
-from nerif.data.scene import rays_in_box
+from nerif.solvers.voxel.projector import PROJECTORS
+from nerif.geometry import rays_in_box
 from nerif.geometry import ProbeBox, arc_rig
 from nerif.renderers.voxel import voxel_deflection
 

@@ -12,7 +12,7 @@ def test_registries_hold_the_paper_variants():
 
 
 def test_unknown_name_lists_registered_ones():
-    with pytest.raises(KeyError, match="registered encoders: frequency, hash, none"):
+    with pytest.raises(ValueError, match="registered encoders: frequency, hash, none"):
         ENCODERS.build({"name": "fourier"})
 
 

@@ -8,7 +8,7 @@ import torch
 
 from nerif.data.transforms import load_views, optics, read_frame, read_split, reference_mask3d, transforms
 from nerif.geometry import ProbeBox
-from nerif.masks.masks import back_project
+from nerif.masks.backprojection import back_project
 from nerif.physics import Ambient
 
 ROOT = Path(os.environ.get("NERIF_SHARED", Path(__file__).resolve().parents[2] / "shared")) / "data" / "nirbos_phantom1"

@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from nerif.data.phantoms import gaussian_blob, gaussian_blob_deflection
-from nerif.data.scene import rays_in_box
+from nerif.geometry import rays_in_box
 from nerif.geometry import ProbeBox, arc_rig
 from nerif.renderers import gradient_volume, voxel_deflection
 

@@ -47,14 +47,15 @@ import numpy as np
 import torch
 import yaml
 
-from nerif.data.scene import (DATASETS, Scene, blocks_inside, dataset_folder, heldout_views, rays_in_box,
-                              region_of_interest, scene_from_images)
-from nerif.export import atomic_write, write_png
-from nerif.geometry import ProbeBox, arc_rig
+from nerif.data.scene import (DATASETS, Scene, blocks_inside, dataset_folder, heldout_views, region_of_interest,
+                              scene_from_images)
+from nerif.geometry import ProbeBox, arc_rig, rays_in_box
+from nerif.io.export import atomic_write, write_png
 from nerif.physics import Ambient
 from nerif.sensing.displacement import displacement_to_deflection
 from nerif.sensing.flow import FLOW
-from nerif.sensing.realistic import resample
+from nerif.sensing.imaging import resample
+from nerif.sensing.optics import probe_distance_mm
 
 log = logging.getLogger(__name__)
 RIG_FILE = "rig.yaml"
@@ -155,7 +156,7 @@ def rig_cameras(rig: dict, binning: int = 1):
                    distance_mm=float(c["camera_to_centre_mm"]), focal_mm=float(c["focal_mm"]), width_px=w, height_px=h,
                    pitch_um=float(c["pitch_um"]),
                    background_behind_mm=float(c["camera_to_background_mm"]) - float(c["camera_to_centre_mm"]),
-                   f_number=float(c["f_number"]))
+                   f_number=float(c["f_number"]), binning=1)
     return full, [cam.binned(binning) if binning > 1 else cam for cam in full]
 
 
@@ -225,30 +226,28 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
     return scene.split_views(held)
 
 
-def write_capture(scene: Scene, rig_cfg: dict, root: Path, heldout: Optional[list] = None) -> Path:
+def write_capture(scene: Scene, root: Path, heldout: Optional[list] = None) -> Path:
     """Write a synthetic scene sensed realistically as a capture folder (8-bit images and ``rig.yaml``).
 
     Args:
-        scene: a scene from :func:`nerif.data.scene.synthetic` with ``sensing=realistic`` (its images).
-        rig_cfg: the :func:`nerif.geometry.arc_rig` parameters that made its cameras.
+        scene: a scene from :func:`nerif.data.scene.synthetic` with ``sensing=realistic`` (its images); the rig
+            file describes its cameras.
     """
     if scene.sensing is None or "distorted" not in scene.sensing:
         raise ValueError("writing a capture needs images: use data.sensing=realistic")
     root = Path(root)
     ref, dist = scene.sensing["reference"], scene.sensing["distorted"]
     n, H, W = dist.shape
-    full_w = int(rig_cfg.get("width_px", 720))
+    cam = scene.cameras[0].unbinned(scene.cameras[0].binning)  # the full sensor
     angles = [round(float(np.degrees(np.arctan2(c.position[0], c.position[2]))), 6) for c in scene.cameras]
     images, refs = [f"distorted_{v:02d}.png" for v in range(n)], [f"reference_{v:02d}.png" for v in range(n)]
     for v in range(n):
         write_png(root / images[v], dist[v])
         write_png(root / refs[v], ref[v])
-    distance = float(rig_cfg.get("distance_mm", 800.0))
     rig = {"format": "nerif-capture", "version": RIG_VERSION,
-           "camera": {"focal_mm": float(rig_cfg.get("focal_mm", 105.0)),
-                      "pitch_um": float(rig_cfg.get("pitch_um", 20.0)) * full_w / W, "sensor_px": [W, H],
-                      "f_number": float(rig_cfg.get("f_number", 32.0)), "camera_to_centre_mm": distance,
-                      "camera_to_background_mm": distance + float(rig_cfg.get("background_behind_mm", 800.0))},
+           "camera": {"focal_mm": float(cam.focal_mm), "pitch_um": round(cam.pitch_mm * 1e3 * cam.width / W, 9),
+                      "sensor_px": [W, H], "f_number": float(cam.f_number),
+                      "camera_to_centre_mm": round(probe_distance_mm(cam), 9), "camera_to_background_mm": float(cam.background_mm)},
            "views": {"angles_deg": angles, "images": images, "references": refs},
            "roi_px": [0, 0, W, H],
            "probe": {"shape": [int(s) for s in scene.box.shape], "voxel_mm": float(scene.box.voxel_mm)},

@@ -17,7 +17,7 @@ from nerif.geometry import ProbeBox
 from nerif.physics import check_temperature, delta_from_n, n_from_delta, n_from_temperature, temperature_from_n
 from nerif.registry import Registry
 
-PHANTOMS = Registry("phantom")
+PHANTOMS = Registry("phantom", package="nerif.data")
 
 
 @dataclass
@@ -52,17 +52,18 @@ def phantom5_temperature(x, y, z):
 
 
 @PHANTOMS.register("phantom5")
-def phantom5(shape: Sequence[int] = (144, 200, 144), voxel_mm: float = 0.5, T0: float = 296.15,
+def phantom5(shape: Sequence[int] = (36, 50, 36), voxel_mm: float = 2.0, T0: float = 296.15,
              n0: float = 1.00027) -> Phantom:
-    """Phantom 5 of the paper sampled at voxel centres (paper grid: 144 x 200 x 144 voxels of 0.5 mm)."""
+    """Phantom 5 of the paper sampled at voxel centres (default scene: 2 mm voxels; paper grid: 144 x 200 x 144
+    voxels of 0.5 mm)."""
     box = ProbeBox(tuple(shape), voxel_mm)
     c = box.centres()
     return Phantom(phantom5_temperature(c[..., 0], c[..., 1], c[..., 2]), box, T0, n0, "phantom5")
 
 
 @PHANTOMS.register("gaussian_blob")
-def gaussian_blob(shape: Sequence[int] = (48, 48, 48), voxel_mm: float = 1.0, centre_mm=(0.0, 0.0, 0.0),
-                  width_mm: float = 6.0, T_peak: float = 1200.0, T0: float = 296.15, n0: float = 1.00027) -> Phantom:
+def gaussian_blob(shape: Sequence[int] = (40, 40, 40), voxel_mm: float = 1.5, centre_mm=(0.0, 0.0, 0.0),
+                  width_mm: float = 8.0, T_peak: float = 1200.0, T0: float = 296.15, n0: float = 1.00027) -> Phantom:
     """A blob Gaussian in refractive index: ``delta = delta_peak exp(-|p - c|^2 / (2 w^2))``, with
     ``delta_peak`` that of ``T_peak``; its deflection is known in closed form (:func:`gaussian_blob_deflection`)."""
     box = ProbeBox(tuple(shape), voxel_mm)
@@ -187,7 +188,7 @@ def _read_array(path: Path, key: Optional[str]) -> np.ndarray:
                 raise ValueError(f"{path} holds {sorted(store)}; set phantom.key to the volume's name")
             key = next(iter(store))
         if key not in store:
-            raise KeyError(f"{path} has no array '{key}'; it holds {sorted(store)}")
+            raise ValueError(f"{path} has no array '{key}'; it holds {sorted(store)}")
         return np.asarray(store[key])
     raise ValueError(f"cannot read volume file {path}: use .npy, .npz, .mat, .h5 or .hdf5")
 

@@ -13,48 +13,18 @@ from typing import Optional
 import numpy as np
 import torch
 
+from nerif.cache import cached_arrays
 from nerif.data.phantoms import PHANTOMS
-from nerif.export import cached_arrays
-from nerif.geometry import Camera, ProbeBox, arc_rig
+from nerif.geometry import RIGS, Camera, ProbeBox, rays_in_box, view_index
 from nerif.physics import Ambient
 from nerif.registry import Registry
 from nerif.renderers.deflection import perpendicular
-from nerif.renderers.voxel import voxel_deflection
-from nerif.sensing.flow import finite_or_masked
-from nerif.sensing.realistic import realistic, resample
+from nerif.sensing.imaging import resample
+from nerif.sensing.models import SENSING
 
 log = logging.getLogger(__name__)
-DATASETS = Registry("dataset")
-SENSING = Registry("sensing")
+DATASETS = Registry("dataset", package="nerif.data")
 _SCENE_CACHE_VERSION = 5
-
-
-def view_index(view_start: torch.Tensor) -> torch.Tensor:
-    """(V + 1,) view offsets -> (N,) view of every ray."""
-    return torch.repeat_interleave(torch.arange(len(view_start) - 1, device=view_start.device), view_start.diff())
-
-
-@SENSING.register("ideal")
-def ideal(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: torch.Tensor, pixel: torch.Tensor,
-          view_start: torch.Tensor, step_mm: Optional[float], rig_binning: int, cache_dir=None, **sensor):
-    """Thin chief rays, noise-free: the full deflection vectors, including the along-ray component that no
-    camera measures (the ``sensor`` parameters do not apply)."""
-    origins = torch.tensor(np.stack([c.position for c in cameras]), dtype=dirs.dtype, device=dirs.device)
-    o = origins[view_index(view_start.to(dirs.device))]
-    return voxel_deflection(delta, box, o, dirs, step_mm), None
-
-
-@SENSING.register("perpendicular")
-def ideal_perpendicular(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: torch.Tensor,
-                        pixel: torch.Tensor, view_start: torch.Tensor, step_mm: Optional[float], rig_binning: int,
-                        cache_dir=None, **sensor):
-    """Thin chief rays, noise-free, but only what a camera can measure: the part of each deflection
-    perpendicular to its ray (a perfect displacement measurement; realistic sensing without blur or noise)."""
-    eps, _ = ideal(delta, box, cameras, dirs, pixel, view_start, step_mm, rig_binning)
-    return perpendicular(eps, dirs), None
-
-
-SENSING.register("realistic")(realistic)
 
 
 @dataclass
@@ -208,26 +178,13 @@ def dataset_folder(root) -> Path:
     return path
 
 
-def rays_in_box(box: ProbeBox, cameras: list[Camera], device="cpu"):
-    """Directions and pixel indices of the rays of each camera that cross the box.
-
-    Raises a clear error for a camera that does not see the box at all.
-    Returns: origins (V, 3), dirs (N, 3), pixel (N,), view_start (V + 1,).
-    """
-    dirs, pixels, starts = [], [], [0]
-    for cam in cameras:
-        d = cam.pixel_directions(torch.float64).to(device)
-        o = torch.as_tensor(cam.position, dtype=torch.float64, device=device).expand_as(d)
-        hit = box.intersect(o, d)[2]
-        if not hit.any():
-            raise ValueError(f"{cam.name} at {np.round(cam.position, 1)} mm does not see the probe box "
-                             f"{box.extent_mm.tolist()} mm: check the rig geometry and the probe box")
-        idx = hit.nonzero()[:, 0]
-        dirs.append(d[idx].float())
-        pixels.append(idx)
-        starts.append(starts[-1] + len(idx))
-    origins = torch.tensor(np.stack([c.position for c in cameras]), dtype=torch.float32, device=device)
-    return origins, torch.cat(dirs), torch.cat(pixels), torch.tensor(starts, device=device)
+def finite_or_masked(u: np.ndarray, what: str) -> np.ndarray:
+    """(..., 2) displacements -> (...) bool, False where a component is NaN or infinite (with a warning)."""
+    ok = np.isfinite(u).all(-1)
+    bad = int(ok.size - ok.sum())
+    if bad:
+        log.warning("%s: %d of %d displacement estimates are not finite; those rays are left out", what, bad, ok.size)
+    return ok
 
 
 def supersampled(phantom: dict, factor: int):
@@ -247,12 +204,12 @@ def keep_rays(dirs, eps, pixel, view_start, keep: torch.Tensor):
 
 @DATASETS.register("synthetic")
 def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", sensor: Optional[dict] = None,
-              render_supersample: int = 1, render_step_mm: Optional[float] = None, cache_dir: Optional[str] = None,
+              render_supersample: int = 4, render_step_mm: Optional[float] = None, cache_dir: Optional[str] = None,
               device: str = "cpu") -> Scene:
     """A phantom seen by a synthetic rig; observations from the voxel forward model.
 
     Args:
-        phantom: phantom config (``name`` + parameters). rig: :func:`nerif.geometry.arc_rig` parameters.
+        phantom: phantom config (``name`` + parameters). rig: a :data:`nerif.geometry.RIGS` config.
         T_max: hottest expected temperature [K] (sets delta_thre).
         sensing: a :data:`SENSING` entry: ``ideal`` (thin rays, noise-free deflection vectors), ``perpendicular``
             (the same, only the part a camera measures) or ``realistic`` (finite aperture, background pattern,
@@ -267,14 +224,14 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
     sensor = dict(sensor or {}) if sensing == "realistic" else {}  # the only sensing with parameters
     ph = PHANTOMS.build(phantom)
     ambient = Ambient(ph.T0, ph.n0, float(T_max))
-    cameras = arc_rig(**rig)
+    cameras = RIGS.build(rig)
     origins, dirs, pixel, view_start = rays_in_box(ph.box, cameras, device)
 
     def observe() -> dict:
         fine = supersampled(phantom, render_supersample) if render_supersample > 1 else ph
         delta = torch.as_tensor(fine.delta, dtype=torch.float32, device=device)
         eps, record = sense(delta, fine.box, cameras, dirs, pixel, view_start, render_step_mm,
-                            int(rig.get("binning", 1)), cache_dir=cache_dir, **sensor)
+                            cameras[0].binning, cache_dir=cache_dir, **sensor)
         return {"eps": eps.cpu().numpy(), **{f"sensing/{k}": v for k, v in (record or {}).items()}}
 
     payload = {"v": _SCENE_CACHE_VERSION, "phantom": phantom, "rig": rig, "step": render_step_mm,

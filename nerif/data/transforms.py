@@ -28,7 +28,7 @@ from nerif.data.scene import (DATASETS, Scene, blocks_inside, dataset_folder, re
                               scene_from_images)
 from nerif.geometry import ProbeBox, camera_from_nerf_pose
 from nerif.physics import Ambient
-from nerif.sensing.realistic import resample
+from nerif.sensing.imaging import resample
 
 _KEYS = ("fl_x", "cx", "cy", "w", "h", "image_min", "image_max", "frames")
 
@@ -111,7 +111,7 @@ def optics(pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32
 
 @DATASETS.register("transforms")
 def transforms(root: str, probe: dict, T0: float, n0: float, T_max: Optional[float] = None,
-               heldout_split: Optional[str] = "val", heldout_views: Optional[list] = None, binning: int = 1,
+               heldout_split: Optional[str] = "val", heldout_views: Optional[list] = None, binning: int = 4,
                sigma_prior: Optional[list] = None,
                pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32.0,
                background_mm: float = 1600.0, device: str = "cpu") -> Scene:

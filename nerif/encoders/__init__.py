@@ -1,11 +1,4 @@
-"""Positional encoders: map network coordinates in [-1, 1]^3 to features.
-
-Each encoder is an ``nn.Module`` with ``out_dim`` and ``forward(x: (N, 3)) -> (N, out_dim)``.
-"""
-from nerif.registry import Registry
-
-ENCODERS = Registry("encoder")
-
-from nerif.encoders import frequency, hash, identity  # noqa: E402,F401  (registration)
+"""Positional encoders: map network coordinates in [-1, 1]^3 to features (``ENCODERS``: none, frequency, hash)."""
+from nerif.encoders.base import ENCODERS
 
 __all__ = ["ENCODERS"]

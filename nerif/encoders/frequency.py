@@ -3,7 +3,7 @@ import math
 import torch
 from torch import nn
 
-from nerif.encoders import ENCODERS
+from nerif.encoders.base import ENCODERS
 
 
 @ENCODERS.register("frequency")

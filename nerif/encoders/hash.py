@@ -3,7 +3,7 @@ import math
 import torch
 from torch import nn
 
-from nerif.encoders import ENCODERS
+from nerif.encoders.base import ENCODERS
 
 # Spatial-hash primes of Teschner et al. / instant-ngp.
 _PRIMES = (1, 2654435761, 805459861)
@@ -50,16 +50,17 @@ class HashGrid(nn.Module):
     ``w = t^2 (3 - 2 t)`` (C1, so the encoding has second derivatives and an autograd deflection loss
     trains it); ``interpolation='linear'`` gives trilinear weights.
 
-    (N, 3) in [-1, 1]^3 -> (N, n_levels * n_features).
+    (N, 3) in [-1, 1]^3 -> (N, n_levels * n_features). Defaults: the CPU default scene's (8 levels 16 -> 96,
+    2^15 entries); the paper's are 16 levels 16 -> 512 and 2^19 entries (``+experiment=paper_phantom5``).
     """
 
     def __init__(
         self,
-        n_levels: int = 16,
+        n_levels: int = 8,
         n_features: int = 2,
-        log2_table_size: int = 19,
+        log2_table_size: int = 15,
         base_resolution: int = 16,
-        max_resolution: int = 512,
+        max_resolution: int = 96,
         init_scale: float = 1e-4,
         interpolation: str = "smoothstep",
     ):

@@ -1,7 +1,7 @@
 import torch
 from torch import nn
 
-from nerif.encoders import ENCODERS
+from nerif.encoders.base import ENCODERS
 
 
 @ENCODERS.register("none")

@@ -1,5 +1,7 @@
-"""Probe box, cameras and rays."""
+"""Probe box, cameras and rig (``RIGS``), and the camera rays that cross the box."""
 from nerif.geometry.box import ProbeBox, face_axes, sample_volume
-from nerif.geometry.camera import Camera, arc_rig, camera_from_nerf_pose, look_at_origin
+from nerif.geometry.camera import RIGS, Camera, arc_rig, camera_from_nerf_pose, look_at_origin
+from nerif.geometry.rays import rays_in_box, view_index
 
-__all__ = ["ProbeBox", "face_axes", "sample_volume", "Camera", "arc_rig", "camera_from_nerf_pose", "look_at_origin"]
+__all__ = ["ProbeBox", "face_axes", "sample_volume", "RIGS", "Camera", "arc_rig", "camera_from_nerf_pose",
+           "look_at_origin", "rays_in_box", "view_index"]

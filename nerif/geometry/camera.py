@@ -11,6 +11,10 @@ from typing import Optional
 import numpy as np
 import torch
 
+from nerif.registry import Registry
+
+RIGS = Registry("rig", package="nerif.geometry")
+
 
 @dataclass(frozen=True)
 class Camera:
@@ -115,6 +119,7 @@ def look_at_origin(position: np.ndarray) -> np.ndarray:
     return np.stack([right, down, forward], axis=1)
 
 
+@RIGS.register("arc")
 def arc_rig(
     n_cameras: int = 12,
     span_deg: float = 165.0,
@@ -125,7 +130,7 @@ def arc_rig(
     pitch_um: float = 20.0,
     background_behind_mm: float = 800.0,
     f_number: float = 32.0,
-    binning: int = 1,
+    binning: int = 8,
     angles_deg: Optional[list[float]] = None,
 ) -> list[Camera]:
     """Cameras evenly over ``span_deg`` on an arc in the x-z plane, all looking at the origin and focused

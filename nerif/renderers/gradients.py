@@ -11,7 +11,7 @@ import torch
 
 from nerif.registry import Registry
 
-GRADIENTS = Registry("gradient operator")
+GRADIENTS = Registry("gradient operator", package="nerif.renderers")
 
 
 @GRADIENTS.register("auto")

@@ -43,7 +43,7 @@ class OccupancySampler(UniformSampler):
         subset_fraction: share of cells visited by a later update.
     """
 
-    def __init__(self, samples_per_ray: int = 64, jitter: bool = True, resolution: int = 128, decay: float = 0.95,
+    def __init__(self, samples_per_ray: int = 32, jitter: bool = True, resolution: int = 64, decay: float = 0.95,
                  threshold: float = 1e-5, update_every: int = 16, warmup: int = 64, full_updates: int = 4,
                  subset_fraction: float = 0.125):
         super().__init__(samples_per_ray, jitter)

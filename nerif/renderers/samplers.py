@@ -13,7 +13,7 @@ import torch
 from nerif.geometry import ProbeBox
 from nerif.registry import Registry
 
-SAMPLERS = Registry("sampler")
+SAMPLERS = Registry("sampler", package="nerif.renderers")
 
 
 @dataclass
@@ -44,7 +44,7 @@ class UniformSampler:
     (``u = 1/2``, the midpoint rule, when ``jitter`` is off or no generator is given).
     """
 
-    def __init__(self, samples_per_ray: int = 64, jitter: bool = True):
+    def __init__(self, samples_per_ray: int = 32, jitter: bool = True):
         if samples_per_ray < 2:
             raise ValueError(f"samples per ray K must be at least 2, got {samples_per_ray}")
         self.samples_per_ray, self.jitter = int(samples_per_ray), jitter

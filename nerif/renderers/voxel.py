@@ -20,6 +20,14 @@ def gradient_volume(delta: torch.Tensor, voxel_mm: float) -> torch.Tensor:
     return torch.stack(torch.gradient(delta, spacing=voxel_mm, edge_order=1))
 
 
+def chord_sampler(box: ProbeBox, step_mm: float | None = None) -> UniformSampler:
+    """The voxel forward model's quadrature: midpoint samples along each chord, as many as a step of at most
+    ``step_mm`` (default half a voxel) needs over the box diagonal (the longest chord)."""
+    step = step_mm or box.voxel_mm / 2
+    diag = float((box.extent_mm**2).sum() ** 0.5)
+    return UniformSampler(max(2, int(-(-diag // step))), jitter=False)
+
+
 def voxel_deflection(delta: torch.Tensor, box: ProbeBox, origins: torch.Tensor, dirs: torch.Tensor,
                      step_mm: float | None = None, chunk: int = 1 << 15) -> torch.Tensor:
     """Thin-ray deflections of a voxel field.
@@ -32,9 +40,7 @@ def voxel_deflection(delta: torch.Tensor, box: ProbeBox, origins: torch.Tensor, 
     Returns:
         (R, 3) world-frame deflection [rad for delta]; zero for rays that miss the box.
     """
-    step = step_mm or box.voxel_mm / 2
-    diag = float((box.extent_mm**2).sum() ** 0.5)
-    sampler = UniformSampler(max(2, int(-(-diag // step))), jitter=False)
+    sampler = chord_sampler(box, step_mm)
     grad = gradient_volume(delta, box.voxel_mm)
     out = []
     for i in range(0, len(origins), chunk):

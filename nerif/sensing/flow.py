@@ -6,16 +6,13 @@ Every estimator is ``fn(distorted, reference, **params) -> (H, W, 2) float32 [px
 """
 from __future__ import annotations
 
-import logging
-
 import cv2
 import numpy as np
 
 from nerif.registry import Registry
 from nerif.sensing.imaging import to_uint8
 
-FLOW = Registry("optical flow")
-log = logging.getLogger(__name__)
+FLOW = Registry("optical flow", package="nerif.sensing")
 
 
 @FLOW.register("farneback")
@@ -40,12 +37,3 @@ def dis(distorted: np.ndarray, reference: np.ndarray, preset: str = "medium", pa
     est.setPatchStride(patch_stride)
     est.setVariationalRefinementIterations(refinement_iterations)
     return est.calc(to_uint8(distorted), to_uint8(reference), None)
-
-
-def finite_or_masked(u: np.ndarray, what: str) -> np.ndarray:
-    """(..., 2) displacements -> (...) bool, False where a component is NaN or infinite (with a warning)."""
-    ok = np.isfinite(u).all(-1)
-    bad = int(ok.size - ok.sum())
-    if bad:
-        log.warning("%s: %d of %d displacement estimates are not finite; those rays are left out", what, bad, ok.size)
-    return ok

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Optional
 
+import cv2
 import kornia
 import numpy as np
 import torch
@@ -51,3 +52,11 @@ def add_noise(image: torch.Tensor, variance: float, generator: Optional[torch.Ge
         return image
     noise = torch.randn(image.shape, generator=generator, dtype=image.dtype, device=image.device)
     return image + variance**0.5 * noise
+
+
+def resample(u: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(h, w, C) field -> (height, width, C), pixel centres aligned: block mean when shrinking, bilinear else."""
+    if u.shape[:2] == (height, width):
+        return u
+    shrink = height < u.shape[0]
+    return cv2.resize(u, (width, height), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)

@@ -11,7 +11,7 @@ import numpy as np
 
 from nerif.registry import Registry
 
-PATTERNS = Registry("background pattern")
+PATTERNS = Registry("background pattern", package="nerif.sensing")
 
 
 def poisson_disk_points(height: int, width: int, spacing_px: float, rng: np.random.Generator,

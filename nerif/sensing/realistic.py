@@ -17,16 +17,16 @@ import hashlib
 import logging
 from typing import Optional
 
-import cv2
 import numpy as np
 import torch
 
-from nerif.export import cached_arrays
+from nerif.cache import cached_arrays
 from nerif.geometry import Camera, ProbeBox
 from nerif.renderers.voxel import voxel_deflection
 from nerif.sensing.displacement import deflection_to_displacement, displacement_to_deflection
 from nerif.sensing.flow import FLOW
-from nerif.sensing.imaging import add_noise, diffraction_blur, to_uint8, warp
+from nerif.sensing.imaging import add_noise, diffraction_blur, resample, to_uint8, warp
+from nerif.sensing.models import SENSING
 from nerif.sensing.optics import aperture_points, aperture_rays, circle_of_confusion
 from nerif.sensing.patterns import PATTERNS
 
@@ -55,14 +55,7 @@ def aperture_deflection(delta: torch.Tensor, box: ProbeBox, camera: Camera, dirs
     return torch.cat(out) if out else delta.new_zeros(0, 3)
 
 
-def resample(u: np.ndarray, height: int, width: int) -> np.ndarray:
-    """(h, w, C) field -> (height, width, C), pixel centres aligned: block mean when shrinking, bilinear else."""
-    if u.shape[:2] == (height, width):
-        return u
-    shrink = height < u.shape[0]
-    return cv2.resize(u, (width, height), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
-
-
+@SENSING.register("realistic")
 def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: torch.Tensor, pixel: torch.Tensor,
               view_start: torch.Tensor, step_mm: Optional[float], rig_binning: int, pattern: dict, flow: dict,
               aperture_rays: int = 60, wavelength_um: float = 0.5, noise_variance: float = 0.0,

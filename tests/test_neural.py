@@ -1,26 +1,25 @@
+"""The neural solver: exact resume, divergence, checks of its settings, ray draws, what it trains on."""
+import warnings
+
 import numpy as np
 import pytest
 import torch
-from omegaconf import OmegaConf
 
+from nerif.configs import group
 from nerif.data import DATASETS
-from nerif.field import build_field
-from nerif.losses import AmbientBoundary
+from nerif.masks import MASKS
 from nerif.metrics import rmse
-from nerif.renderers import GRADIENTS, SAMPLERS
-from nerif.trainer import DivergenceError, Trainer
-from tests.helpers import tiny_config
+from nerif.renderers import GRADIENTS
+from nerif.solvers import SOLVERS, DivergenceError
+from tests.helpers import solver, tiny_config
 
 
-def make_trainer(*overrides, **kw):
+def make_trainer(*overrides, masks=None):
+    """The tiny scene's neural solver (no masks unless given), its weights drawn under seed 0."""
     cfg = tiny_config(*overrides)
-    scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True))
+    scene = DATASETS.build(group(cfg, "data"))
     torch.manual_seed(0)
-    field = build_field(cfg, scene.box)
-    tc = cfg.train
-    return Trainer(field, scene, SAMPLERS.build(cfg.sampler), dict(cfg.grad.weights), iterations=tc.iterations,
-                   rays_per_view=tc.rays_per_view, lr=tc.lr, eval_rays_per_view=tc.eval_rays_per_view,
-                   boundary=AmbientBoundary(scene.box), **kw)
+    return solver(cfg, scene, masks)
 
 
 def test_resuming_a_checkpoint_continues_exactly(tmp_path):
@@ -48,7 +47,7 @@ def test_a_diverging_run_stops_and_keeps_the_last_good_checkpoint(tmp_path):
     with torch.no_grad():
         tr.field.mlp[0].weight.fill_(float("nan"))
     with pytest.raises(DivergenceError, match="diverged"):
-        tr.fit(eval_every=100, checkpoint_every=1, checkpoint=tmp_path / "ck.pt", progress=False)
+        tr.fit(checkpoint_every=1, checkpoint=tmp_path / "ck.pt", progress=False)
     assert torch.load(tmp_path / "ck.pt", weights_only=False)["iteration"] == 5
 
 
@@ -78,11 +77,34 @@ def test_no_second_order_graph_when_only_the_discrete_term_trains(monkeypatch):
     assert calls == [True]
 
 
-def test_rays_per_view_and_iterations_are_checked():
-    with pytest.raises(ValueError, match="rays per view"):
-        make_trainer("train.rays_per_view=0")
-    with pytest.raises(ValueError, match="samples per ray K must be at least 2"):
-        make_trainer("sampler.samples_per_ray=1")
+@pytest.mark.parametrize("override, message", [
+    ("train.rays_per_view=0", "rays per view must be at least 1"),
+    ("train.iterations=0", "iterations must be at least 1"),
+    ("train.outside_fraction=1.0", "outside_fraction must be within"),
+    ("sampler.samples_per_ray=1", "samples per ray K must be at least 2"),
+    ("grad.weights.discrete=0", "every gradient-loss weight is zero"),
+    ("encoder.log2_table_size=30", "log2_table_size must be within"),
+    ("loss.ambient_faces=[w]", "ambient faces"),
+])
+def test_settings_are_checked_before_any_data(override, message):
+    with pytest.raises(ValueError, match=message):
+        SOLVERS.build(group(tiny_config(override), "solver"))
+
+
+def test_a_view_with_an_empty_2d_mask_trains_on_all_its_rays():
+    cfg = tiny_config()
+    scene = DATASETS.build(group(cfg, "data"))
+    sl = scene.view_slice(2)
+    scene.eps[sl] = 0.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the empty mask's warning (tests/test_backprojection.py)
+        masks = MASKS.build({"name": "2d", "threshold": 1e-3, "radius_px": 2}, scene=scene)
+    tr = solver(tiny_config("train.rays_per_view=16", "train.outside_fraction=0.1"), scene, masks)
+    idx = tr.draw(2)
+    assert len(idx) == 16 and bool(((idx >= sl.start) & (idx < sl.stop)).all())
+    batch, sl0 = tr.draw(0), scene.view_slice(0)  # a view with a mask: 16 - round(1.6) = 14 rays inside it, 2 outside
+    assert int(torch.isin(batch, masks.inside[0]).sum()) == 14 and bool(((batch >= sl0.start) & (batch < sl0.stop)).all())
+    assert np.isfinite(tr.step()["loss"])
 
 
 @pytest.mark.slow

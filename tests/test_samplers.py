@@ -1,7 +1,9 @@
+"""Samplers: packed samples along rays."""
 import torch
 
 from nerif.geometry import ProbeBox
-from nerif.renderers import SAMPLERS, integrate, render_deflections
+from nerif.renderers import SAMPLERS, integrate
+
 
 BOX = ProbeBox((10, 20, 10), 1.0)
 
@@ -29,26 +31,3 @@ def test_jitter_is_one_offset_per_ray_within_a_step():
     gaps = z[:-1] - z[1:]
     torch.testing.assert_close(gaps, torch.full_like(gaps, 10.0 / 8))  # equal spacing: one shared offset
     assert 5.0 - 10.0 / 8 <= z[0].item() <= 5.0  # first sample inside the first step
-
-
-def test_a_linear_field_deflects_by_gradient_times_chord_for_both_operators():
-    o, d = _rays()
-    s = SAMPLERS.build({"name": "uniform", "samples_per_ray": 16, "jitter": False})(BOX, o, d)
-    g = torch.tensor([0.02, -0.01, 0.005])
-    eps = render_deflections(lambda p: p @ g, s, {"auto": False, "discrete": False}, step_mm=0.1)
-    t0, t1, hit = BOX.intersect(o, d)
-    expect = ((t1 - t0).clamp_min(0) * hit)[:, None] * g
-    for name in ("auto", "discrete"):
-        torch.testing.assert_close(eps[name], expect, rtol=1e-5, atol=1e-7)
-
-
-def test_perpendicular_part_is_what_a_camera_measures():
-    from nerif.renderers import perpendicular
-
-    g = torch.Generator().manual_seed(0)
-    d = torch.nn.functional.normalize(torch.randn(50, 3, generator=g, dtype=torch.float64), dim=-1)
-    eps = torch.randn(50, 3, generator=g, dtype=torch.float64)
-    p = perpendicular(eps, d)
-    torch.testing.assert_close((p * d).sum(-1), torch.zeros(50, dtype=torch.float64), atol=1e-15, rtol=0)
-    torch.testing.assert_close(perpendicular(p, d), p)  # a projection
-    torch.testing.assert_close(eps - p, (eps * d).sum(-1, keepdim=True) * d)

@@ -13,10 +13,10 @@ from typing import Callable, Optional
 
 import torch
 
-from nerif.baselines.projector import adjoint
+from nerif.solvers.voxel.projector import adjoint
 from nerif.registry import Registry
 
-REGULARIZERS = Registry("regularizer")
+REGULARIZERS = Registry("regularizer", package="nerif.solvers.voxel")
 
 
 def forward_differences(x: torch.Tensor) -> torch.Tensor:

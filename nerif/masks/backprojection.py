@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from nerif.geometry import ProbeBox, sample_volume
-from nerif.masks import MASKS, Masks
+from nerif.masks.base import MASKS, Masks
 
 
 def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2) -> list[np.ndarray]:
@@ -80,12 +80,6 @@ def _inside(scene, images) -> list[torch.Tensor]:
         idx = torch.arange(sl.start, sl.stop, device=scene.pixel.device)[flat[scene.pixel[sl]]]
         inside.append(idx)
     return inside
-
-
-@MASKS.register("none")
-def no_mask(scene) -> Masks:
-    """Train on every ray; no gate."""
-    return Masks()
 
 
 @MASKS.register("2d")

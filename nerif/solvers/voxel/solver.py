@@ -3,17 +3,18 @@ from __future__ import annotations
 
 import hashlib
 import time
-from typing import Optional
+from typing import Mapping, Optional
 
 import numpy as np
 import torch
 
-from nerif.baselines.cgls import CGLS
-from nerif.baselines.projector import PROJECTORS, SparseProjector
 from nerif.geometry import face_axes
-from nerif.loop import IterativeSolver
 from nerif.renderers.deflection import perpendicular
 from nerif.renderers.voxel import voxel_deflection
+from nerif.solvers.base import SOLVERS, IterativeSolver
+from nerif.solvers.voxel.cgls import CGLS, REGULARIZERS
+from nerif.solvers.voxel.projector import PROJECTORS, SparseProjector
+
 
 def boundary_mask(shape, faces) -> np.ndarray:
     """(nx, ny, nz) bool, False on the given faces of the grid (``x``, ``y``, ``z``: both faces of that axis)."""
@@ -41,47 +42,64 @@ def built_projector(name: str, box, origins: torch.Tensor, dirs: torch.Tensor, s
     return _LAST_PROJECTOR["projector"]
 
 
+@SOLVERS.register("cgls")
 class CGLSSolver(IterativeSolver):
-    """CGLS on every ray of the scene for sigma on the probe grid.
+    """CGLS on every ray of the scene for sigma on the probe grid (``solver=cgls``).
 
     The deflections fix sigma up to a constant; as the neural solver's ambient boundary condition does, the
     voxels of ``ambient_faces`` are held at sigma = 0 (ambient gas), which removes that null space. A 3-D mask
     restricts the unknowns further.
 
     Args:
-        scene: rays and observations. iterations: CGLS iterations (upper bound).
-        regularizer, lam, reweight_every, tv_eps: see :class:`nerif.baselines.cgls.CGLS`.
+        iterations: CGLS iterations (upper bound). eval_every, metrics, seed, label: see :class:`IterativeSolver`.
+        regularizer, lam, reweight_every, tv_eps: see :class:`nerif.solvers.voxel.cgls.CGLS`.
         tol: stop once |b - A x| / |b| falls below it (discrepancy principle; None: run all iterations).
-        mask_volume: (nx, ny, nz) 3-D mask, > 0.5 = unknown (None: every voxel).
+        ambient_faces: axes whose two faces are held at sigma = 0 (``loss.ambient_faces``).
         projector: ``sparse``, ``matrix_free`` or ``auto`` (sparse when its matrix fits in ``max_matrix_gib``).
-        step_mm, chunk: projector quadrature step and rays per batch.
+        step_mm, chunk: projector quadrature step and rays per batch. dtype: ``float32`` or ``float64``.
     """
 
     name = "cgls"
 
-    def __init__(self, scene, *, iterations: int, regularizer: str = "none", lam: float = 0.0,
-                 tol: Optional[float] = None, reweight_every: int = 20, tv_eps: float = 1e-3,
-                 ambient_faces=("x",), mask_volume: Optional[np.ndarray] = None, projector: str = "auto",
-                 max_matrix_gib: float = 4.0, step_mm: Optional[float] = None, chunk: int = 1 << 14,
-                 dtype: str = "float32", flame_threshold_K: float = 1.0, heldout_rays_per_view: int = 256):
-        super().__init__(scene, iterations, flame_threshold_K, heldout_rays_per_view)
-        dt = getattr(torch, dtype)
+    def __init__(self, *, iterations: int, eval_every: int, regularizer: str, lam: float, tol: Optional[float],
+                 reweight_every: int, tv_eps: float, ambient_faces, projector: str, max_matrix_gib: float,
+                 step_mm: Optional[float], chunk: int, dtype: str, metrics: Mapping, seed: int, label: str):
+        super().__init__(iterations=iterations, eval_every=eval_every, metrics=metrics, seed=seed, label=label)
+        if REGULARIZERS.build({"name": regularizer}) is not None and not lam > 0:
+            raise ValueError(f"regularizer '{regularizer}' needs a weight solver.lam > 0, got {lam}")
+        if projector != "auto":
+            PROJECTORS.get(projector)
+        if dtype not in ("float32", "float64"):
+            raise ValueError(f"solver.dtype must be float32 or float64, got '{dtype}'")
+        face_axes(ambient_faces)
+        self.regularizer, self.lam, self.tol = regularizer, float(lam), tol
+        self.reweight_every, self.tv_eps = int(reweight_every), float(tv_eps)
+        self.ambient_faces = list(ambient_faces)
+        self.projector_name, self.max_matrix_gib = projector, float(max_matrix_gib)
+        self.step_mm, self.chunk, self.dtype = step_mm, int(chunk), getattr(torch, dtype)
+        self.labels.update(regularizer=regularizer, lam=float(lam))
+
+    def setup(self, scene, masks) -> "CGLSSolver":
+        """Build the projector for every ray of ``scene`` and the CGLS state; unknowns: the voxels off the ambient
+        faces, inside ``masks.volume`` where there is one."""
+        super().setup(scene, masks)
+        dt = self.dtype
         self.scale = scene.ambient.delta_thre
         origins = scene.origins[scene.ray_views()].to(dt)
+        projector = self.projector_name
         if projector == "auto":
-            fits = SparseProjector.memory_bytes(scene.box, len(origins), step_mm) <= max_matrix_gib * 2**30
+            fits = SparseProjector.memory_bytes(scene.box, len(origins), self.step_mm) <= self.max_matrix_gib * 2**30
             projector = "sparse" if fits else "matrix_free"
-        self.projector = built_projector(projector, scene.box, origins, scene.dirs.to(dt), step_mm, chunk)
+        self.projector = built_projector(projector, scene.box, origins, scene.dirs.to(dt), self.step_mm, self.chunk)
         self.projector_name = projector
-        unknown = boundary_mask(scene.box.shape, ambient_faces)
-        if mask_volume is not None:
-            unknown &= np.asarray(mask_volume) > 0.5
+        unknown = boundary_mask(scene.box.shape, self.ambient_faces)
+        if masks.volume is not None:
+            unknown &= np.asarray(masks.volume) > 0.5
         if not unknown.any():
             raise ValueError("CGLS has no unknowns: the 3-D mask is empty inside the ambient faces")
         self.unknowns = int(unknown.sum())
         mask = torch.as_tensor(unknown, dtype=dt, device=self.device)
         b = (scene.eps / self.scale).to(dt)
-        self.tol = tol
         d = scene.dirs.to(dt)
         P = (lambda e: perpendicular(e, d)) if scene.perpendicular_only else (lambda e: e)  # symmetric: (P A)^T = A^T P
 
@@ -91,9 +109,9 @@ class CGLSSolver(IterativeSolver):
         def Atb(y):
             return self.projector.Atb(P(y))
 
-        self.step_mm, self.dtype = step_mm, dt
-        self.cgls = CGLS(Ax, Atb, b, scene.box.shape, regularizer=regularizer, lam=lam,
-                         mask=mask, reweight_every=reweight_every, tv_eps=tv_eps)
+        self.cgls = CGLS(Ax, Atb, b, scene.box.shape, regularizer=self.regularizer, lam=self.lam,
+                         mask=mask, reweight_every=self.reweight_every, tv_eps=self.tv_eps)
+        return self
 
     def step(self) -> dict:
         t0 = time.perf_counter()

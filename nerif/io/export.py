@@ -1,8 +1,7 @@
-"""Writing results: atomic file writes, volumes (.npz and VTK .vti for ParaView), JSON metrics."""
+"""Writing results: atomic file writes, volumes (.npz and VTK .vti for ParaView), JSON metrics, PNG images."""
 from __future__ import annotations
 
 import base64
-import hashlib
 import json
 import os
 import tempfile
@@ -54,20 +53,6 @@ def write_npz(path: Path, **arrays) -> Path:
             np.savez_compressed(f, **arrays)
 
     return atomic_write(path, write)
-
-
-def cached_arrays(cache_dir, prefix: str, payload: dict, compute: Callable[[], dict]) -> dict:
-    """``compute()`` (a dict of arrays), stored as ``<cache_dir>/<prefix>-<hash of payload>.npz`` and read back
-    from there next time; ``cache_dir=None`` always computes."""
-    key = hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
-    path = Path(cache_dir).expanduser() / f"{prefix}-{key}.npz" if cache_dir else None
-    if path is not None and path.is_file():
-        with np.load(path) as f:
-            return {k: f[k] for k in f.files}
-    arrays = compute()
-    if path is not None:
-        write_npz(path, **arrays)
-    return arrays
 
 
 def write_vti(path: Path, voxel_mm: float, origin_mm, **volumes: np.ndarray) -> Path:

@@ -2,18 +2,17 @@ import warnings
 
 import numpy as np
 import pytest
-import torch
 
 from nerif.data import DATASETS
 from nerif.masks import MASKS
-from nerif.masks.masks import back_project, deflection_masks
+from nerif.masks.backprojection import back_project, deflection_masks
 
 SPHERE = {"name": "gaussian_blob", "shape": [24, 24, 24], "voxel_mm": 2.0, "width_mm": 5.0, "T_peak": 1500.0}
 
 
 @pytest.fixture(scope="module")
 def scene():
-    return DATASETS.build({"name": "synthetic", "phantom": SPHERE, "rig": {"n_cameras": 6, "binning": 20},
+    return DATASETS.build({"name": "synthetic", "render_supersample": 1, "phantom": SPHERE, "rig": {"name": "arc", "n_cameras": 6, "binning": 20},
                            "T_max": 2000.0})
 
 
@@ -44,44 +43,21 @@ def test_2d_masks_fill_the_quiet_core_of_a_symmetric_flame(scene):
     assert img[v, u]  # the central ray is barely deflected but lies inside the silhouette
 
 
-def test_a_view_with_no_signal_warns_and_trains_on_all_its_rays(scene):
-    quiet = DATASETS.build({"name": "synthetic", "phantom": SPHERE, "rig": {"n_cameras": 6, "binning": 20},
+def test_a_view_with_no_signal_warns_and_gets_an_empty_mask(scene):
+    quiet = DATASETS.build({"name": "synthetic", "render_supersample": 1, "phantom": SPHERE, "rig": {"name": "arc", "n_cameras": 6, "binning": 20},
                             "T_max": 2000.0})
     sl = slice(int(quiet.view_start[2]), int(quiet.view_start[3]))
     quiet.eps[sl] = 0.0
     with pytest.warns(UserWarning, match="camera 2 .* 2-D mask is empty"):
         masks = MASKS.build({"name": "2d", "threshold": 1e-3, "radius_px": 2}, scene=quiet)
     assert len(masks.inside[2]) == 0
-    from nerif.trainer import Trainer
-    from nerif.field import NeuralField
-    from nerif.encoders import ENCODERS
-    from nerif.renderers import SAMPLERS
-
-    tr = Trainer(NeuralField(ENCODERS.build({"name": "none"}), quiet.box), quiet, SAMPLERS.build({"name": "uniform"}),
-                 {"discrete": 1.0}, iterations=1, rays_per_view=16, inside=masks.inside, outside_fraction=0.1)
-    idx = tr.draw(2)
-    assert len(idx) == 16 and bool(((idx >= sl.start) & (idx < sl.stop)).all())
-    assert np.isfinite(tr.step()["loss"])
 
 
 def test_an_empty_3d_mask_is_a_clear_error(scene):
-    silent = DATASETS.build({"name": "synthetic", "phantom": SPHERE, "rig": {"n_cameras": 6, "binning": 20},
+    silent = DATASETS.build({"name": "synthetic", "render_supersample": 1, "phantom": SPHERE, "rig": {"name": "arc", "n_cameras": 6, "binning": 20},
                              "T_max": 2000.0})
     silent.eps.zero_()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with pytest.raises(ValueError, match="3-D mask is empty"):
             MASKS.build({"name": "3d"}, scene=silent)
-
-
-def test_gate_skips_the_network_where_the_mask_is_zero(scene):
-    from nerif.encoders import ENCODERS
-    from nerif.field import NeuralField
-
-    masks = MASKS.build({"name": "3d"}, scene=scene)
-    field = NeuralField(ENCODERS.build({"name": "frequency"}), scene.box, gate=masks.gate)
-    seen = []
-    field.mlp.register_forward_hook(lambda m, i, o: seen.append(len(i[0])))
-    p = torch.as_tensor(scene.box.centres().reshape(-1, 3), dtype=torch.float32)
-    s = field(p)
-    assert seen[0] < 0.6 * len(p) and s[torch.as_tensor(~masks.volume.reshape(-1))].abs().max() == 0

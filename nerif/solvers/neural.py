@@ -1,68 +1,92 @@
-"""Training a neural field on a scene's deflections: the optimisation state and its loop."""
+"""The neural solver (``solver=nerif``): a neural field trained on a scene's deflections, its optimisation state
+and its steps."""
 from __future__ import annotations
 
 import time
-from typing import Optional
+from typing import Mapping, Optional
 
 import numpy as np
 import torch
 
 from nerif.data import Scene
-from nerif.field import NeuralField
+from nerif.encoders import ENCODERS
+from nerif.field import NeuralField, prior_interval
+from nerif.geometry import face_axes
 from nerif.losses import AmbientBoundary, deflection_terms, weighted_sum
-from nerif.loop import IterativeSolver, fixed_rays
 from nerif.metrics import deflection_rmse
-from nerif.renderers import render_deflections
+from nerif.renderers import SAMPLERS, render_deflections
 from nerif.renderers.samplers import UniformSampler
+from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, fixed_rays
 
 
-class DivergenceError(RuntimeError):
-    """The loss became NaN or infinite."""
-
-
-class Trainer(IterativeSolver):
+@SOLVERS.register("nerif")
+class NeuralSolver(IterativeSolver):
     """Adam + cosine annealing on random rays of one view per iteration (views cycled).
 
+    Built from ``conf/solver/nerif.yaml``, whose groups it reads:
+
     Args:
-        field: the neural field. scene: rays and observations (on the training device).
-        sampler: rays -> packed samples. weights: gradient operator -> loss weight (lambda_a, lambda_d).
-        boundary: ambient boundary condition (None: none).
-        inside: per view, the scene indices of the rays training draws from (the 2-D masks); None: all rays.
-        outside_fraction: share of each batch drawn from the view's rays outside its 2-D mask.
-        iterations, rays_per_view, lr, betas, eps, lr_min: optimisation settings.
-        eval_rays_per_view: fixed rays per view for the deflection metrics.
-        seed: RNG seed (ray draws and sample offsets).
+        encoder: an :data:`ENCODERS` config. field: ``hidden`` widths and ``prior`` interval of the MLP
+            (null: the data's own, else :data:`nerif.field.DEFAULT_PRIOR`).
+        grad: ``weights``, gradient operator -> loss weight (lambda_a for ``auto``, lambda_d for ``discrete``).
+        sampler: a :data:`SAMPLERS` config. loss: the ambient boundary condition (``ambient_faces``,
+            ``ambient_weight``, ``ambient_points``; see :class:`nerif.losses.AmbientBoundary`).
+        train: ``iterations``, ``eval_every``, ``rays_per_view``, ``outside_fraction`` (share of each batch drawn
+            from the view's rays outside its 2-D mask), and Adam's ``lr``, ``betas``, ``eps`` with the cosine
+            floor ``lr_min``.
+        metrics, seed, label: see :class:`IterativeSolver`.
     """
 
     name = "nerif"
 
-    def __init__(self, field: NeuralField, scene: Scene, sampler, weights: dict, *, iterations: int,
-                 boundary: Optional[AmbientBoundary] = None, inside: Optional[list] = None,
-                 outside_fraction: float = 0.0,
-                 rays_per_view: int, lr: float = 2e-2, betas=(0.9, 0.99), eps: float = 1e-8, lr_min: float = 1e-6,
-                 eval_rays_per_view: int = 512, flame_threshold_K: float = 1.0, seed: int = 0):
-        if rays_per_view < 1:
-            raise ValueError(f"rays per view must be at least 1, got {rays_per_view}")
-        super().__init__(scene, iterations, flame_threshold_K, eval_rays_per_view, seed)
-        self.field, self.sampler = field, sampler
-        self.weights = {k: float(v) for k, v in weights.items()}
-        self.boundary = boundary if boundary is not None and boundary.active else None
-        self.rays_per_view = int(rays_per_view)
-        self.pools = self._pools(scene, inside, outside_fraction)
-        params = list(field.parameters())
+    def __init__(self, *, encoder: Mapping, field: Mapping, grad: Mapping, sampler: Mapping, loss: Mapping,
+                 train: Mapping, metrics: Mapping, seed: int, label: str):
+        super().__init__(iterations=train["iterations"], eval_every=train["eval_every"], metrics=metrics, seed=seed,
+                         label=label)
+        self.rays_per_view = int(train["rays_per_view"])
+        if self.rays_per_view < 1:
+            raise ValueError(f"rays per view must be at least 1, got {self.rays_per_view}")
+        self.outside_fraction = float(train["outside_fraction"])
+        if not 0.0 <= self.outside_fraction < 1.0:
+            raise ValueError(f"outside_fraction must be within [0, 1), got {self.outside_fraction}")
+        self.weights = {k: float(v) for k, v in grad["weights"].items()}
+        if not any(w > 0 for w in self.weights.values()):
+            raise ValueError("every gradient-loss weight is zero: nothing to train on (set grad.weights)")
+        face_axes(loss["ambient_faces"])
+        self.encoder = ENCODERS.build(encoder)
+        self.sampler = SAMPLERS.build(sampler)
+        self.hidden, self.prior = tuple(field["hidden"]), field["prior"]
+        self.loss_cfg = dict(loss)
+        self.optim_cfg = {k: train[k] for k in ("lr", "betas", "eps", "lr_min")}
+        self.labels.update(encoder=encoder["name"], grad=grad["name"])
+
+    def setup(self, scene: Scene, masks) -> "NeuralSolver":
+        """The field on the scene's probe box (gated by ``masks.gate``), its optimiser, and the ray pools training
+        draws from (``masks.inside``)."""
+        super().setup(scene, masks)
+        prior = prior_interval(self.prior, scene.sigma_prior)
+        self.field = NeuralField(self.encoder, scene.box, hidden=self.hidden, prior=prior, gate=masks.gate).to(self.device)
+        b = AmbientBoundary(scene.box, list(self.loss_cfg["ambient_faces"]), self.loss_cfg["ambient_weight"],
+                            self.loss_cfg["ambient_points"])
+        self.boundary = b if b.active else None
+        self.pools = self._pools(scene, masks.inside, self.outside_fraction)
+        oc = self.optim_cfg
         fused = self.device.type == "cuda"
-        self.optimizer = torch.optim.Adam(params, lr=lr, betas=tuple(betas), eps=eps, fused=fused)
-        self.scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(self.optimizer, T_max=self.iterations, eta_min=lr_min)
-        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.optimizer = torch.optim.Adam(list(self.field.parameters()), lr=oc["lr"], betas=tuple(oc["betas"]),
+                                          eps=oc["eps"], fused=fused)
+        self.scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(self.optimizer, T_max=self.iterations,
+                                                                    eta_min=oc["lr_min"])
+        self.generator = torch.Generator(self.device).manual_seed(self.seed)
         # central-difference step: b_min / (2 K), K the most samples per ray
-        self.step_mm = scene.box.shortest_side_mm / (2 * sampler.samples_per_ray)
+        self.step_mm = scene.box.shortest_side_mm / (2 * self.sampler.samples_per_ray)
         self.scale = scene.ambient.delta_thre  # rad per unit of sigma deflection
         self.samples_seen = 0
         self.rays_seen = 0
         self.samples_max = 0
         self.rays_skipped = 0
-        self._eval_index = fixed_rays(scene, eval_rays_per_view, seed + 1)
-        self._eval_sampler = UniformSampler(sampler.samples_per_ray, jitter=False)
+        self._eval_index = fixed_rays(scene, self.eval_rays_per_view, self.seed + 1)
+        self._eval_sampler = UniformSampler(self.sampler.samples_per_ray, jitter=False)
+        return self
 
     # --- batches ---
     def rays(self, index: torch.Tensor):
@@ -75,9 +99,8 @@ class Trainer(IterativeSolver):
         return d if self.scene.perpendicular_only else None
 
     def _pools(self, scene: Scene, inside, outside_fraction: float) -> list[list[tuple[torch.Tensor, int]]]:
-        """Per view: (ray indices, how many to draw) pairs."""
-        if not 0.0 <= outside_fraction < 1.0:
-            raise ValueError(f"outside_fraction must be within [0, 1), got {outside_fraction}")
+        """Per view: (ray indices, how many to draw) pairs; ``inside``: per view, the scene indices of the rays
+        inside its 2-D mask (None: every ray)."""
         pools = []
         for v in range(scene.n_views):
             sl = scene.view_slice(v)

@@ -19,10 +19,9 @@ import torch
 
 from nerif.geometry import ProbeBox
 from nerif.registry import Registry
-from nerif.renderers.samplers import UniformSampler
-from nerif.renderers.voxel import gradient_volume, voxel_deflection
+from nerif.renderers.voxel import chord_sampler, gradient_volume, voxel_deflection
 
-PROJECTORS = Registry("projector")
+PROJECTORS = Registry("projector", package="nerif.solvers.voxel")
 
 
 def adjoint(op, y: torch.Tensor, shape, like: torch.Tensor) -> torch.Tensor:
@@ -74,9 +73,7 @@ def interpolation_matrix(box: ProbeBox, origins: torch.Tensor, dirs: torch.Tenso
                          chunk: int = 1 << 14) -> torch.Tensor:
     """S: (R, V) sparse COO, ``(S v)_r = sum_i v(p_ri) dt_ri`` for a voxel field v flattened as (nx, ny, nz),
     with the samples and the border-clamped trilinear weights of :func:`nerif.renderers.voxel.voxel_deflection`."""
-    step = step_mm or box.voxel_mm / 2
-    diag = float((box.extent_mm**2).sum() ** 0.5)
-    sampler = UniformSampler(max(2, int(-(-diag // step))), jitter=False)
+    sampler = chord_sampler(box, step_mm)
     n = torch.as_tensor(box.shape, device=dirs.device)
     half = torch.as_tensor(box.half_mm, dtype=dirs.dtype, device=dirs.device)
     parts = []
@@ -108,9 +105,7 @@ class SparseProjector:
     @staticmethod
     def memory_bytes(box: ProbeBox, n_rays: int, step_mm: Optional[float] = None) -> float:
         """Upper bound of the memory S and its transpose take (8 trilinear weights per sample, int64 + float)."""
-        step = step_mm or box.voxel_mm / 2
-        samples = n_rays * max(2, int(-(-float((box.extent_mm**2).sum() ** 0.5) // step)))
-        return 2 * samples * 8 * 12.0
+        return 2 * n_rays * chord_sampler(box, step_mm).samples_per_ray * 8 * 12.0
 
     def __init__(self, box: ProbeBox, origins: torch.Tensor, dirs: torch.Tensor, step_mm: Optional[float] = None,
                  chunk: int = 1 << 14):

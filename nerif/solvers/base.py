@@ -1,25 +1,35 @@
-"""The iteration loop shared by every solver: progress, evaluation cadence, atomic checkpoints, Ctrl-C, timing.
+"""The solver registry and the iteration loop every solver shares: progress, evaluation cadence, atomic
+checkpoints, Ctrl-C, timing, and the errors of a reconstruction against the truth and the held-out views.
 
-A solver subclasses :class:`IterativeSolver` and provides ``step() -> dict`` (one timed iteration, its
-terms as floats), ``evaluate() -> dict`` (appends to ``history``), ``reconstruction() -> sigma volume``,
-``predict(origins, dirs) -> deflections`` (of any rays, for the held-out views) and ``state_dict`` /
-``load_state_dict`` for checkpoints.
+A solver is built from its config group like any component (``SOLVERS.build(cfg.solver)``: cheap, it checks its
+settings before any data are made), then given the data with :meth:`IterativeSolver.setup` ``(scene, masks)``
+and run with :meth:`IterativeSolver.fit`. It subclasses :class:`IterativeSolver` and provides ``setup``,
+``step() -> dict`` (one timed iteration, its terms as floats), ``evaluate() -> dict`` (appends to ``history``),
+``reconstruction() -> sigma volume``, ``predict(origins, dirs) -> deflections`` (of any rays, for the held-out
+views) and ``state_dict`` / ``load_state_dict`` for checkpoints. Every module of :mod:`nerif.solvers` registers
+its solvers in :data:`SOLVERS`.
 """
 from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Callable, Mapping, Optional
 
 import numpy as np
 import torch
 
-from nerif.export import atomic_save_torch
+from nerif.io.export import atomic_save_torch
 from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
+from nerif.registry import Registry
 from nerif.sensing.displacement import view_displacements
 
 log = logging.getLogger(__name__)
+SOLVERS = Registry("solver", package="nerif.solvers")
 _COUNTERS = ("iteration", "history", "train_seconds", "step_times")
+
+
+class DivergenceError(RuntimeError):
+    """The loss became NaN or infinite."""
 
 
 def fixed_rays(scene, per_view: int, seed: int) -> torch.Tensor:
@@ -32,29 +42,49 @@ def fixed_rays(scene, per_view: int, seed: int) -> torch.Tensor:
 
 class IterativeSolver:
     """State every solver shares: ``iterations`` to run, ``iteration`` done, ``history`` of evaluations,
-    ``train_seconds`` of timed steps and each step's duration."""
+    ``train_seconds`` of timed steps and each step's duration.
+
+    Args:
+        iterations: iterations to run (an upper bound where the solver can stop early).
+        eval_every: iterations between evaluations.
+        metrics: ``flame_threshold_K`` (flame region: ``|T_true - T0|`` above it) and ``eval_rays_per_view``
+            (fixed rays per view on which errors are followed during the run).
+        seed: seeds every random draw of the solver (rays, samples, evaluation subsets).
+        label: what the run is called (its folder name), e.g. ``hash-discrete`` or ``cgls-tv``.
+    """
 
     name = "solver"
 
-    def __init__(self, scene, iterations: int, flame_threshold_K: float = 1.0, heldout_rays_per_view: int = 256,
-                 seed: int = 0):
+    def __init__(self, *, iterations: int, eval_every: int, metrics: Mapping, seed: int, label: str):
         if iterations < 1:
             raise ValueError(f"iterations must be at least 1, got {iterations}")
-        self.scene, self.iterations = scene, int(iterations)
-        self._heldout_index, self._heldout_peaks = None, {}
-        if scene.heldout is not None:
-            h = scene.heldout
-            self._heldout_index = fixed_rays(h, heldout_rays_per_view, seed + 2)
-            self._heldout_peaks["deflection"] = value_range(h.eps)  # PSNR peaks: the range of every observation
-            if h.ambient.temperature_known:
-                self._heldout_peaks["displacement"] = value_range(view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras))
-        self.device = scene.dirs.device
-        self.flame_threshold_K = flame_threshold_K
+        if eval_every < 1:
+            raise ValueError(f"evaluations every {eval_every} iterations: it must be at least 1")
+        self.iterations, self.eval_every = int(iterations), int(eval_every)
+        self.flame_threshold_K = float(metrics["flame_threshold_K"])
+        self.eval_rays_per_view = int(metrics["eval_rays_per_view"])
+        if self.eval_rays_per_view < 1:
+            raise ValueError(f"metrics.eval_rays_per_view must be at least 1, got {self.eval_rays_per_view}")
+        self.seed, self.label = int(seed), str(label)
+        self.scene = None
         self.iteration = 0
         self.history: list[dict] = []
         self.train_seconds = 0.0
         self.step_times: list[float] = []
         self.labels = {"solver": self.name}  # what this run is, for outputs and tables
+
+    def setup(self, scene, masks) -> "IterativeSolver":
+        """Give the solver its data: the scene (rays, observations, held-out views) and the masks. Subclasses
+        build their data-dependent state here, after this base part. Returns the solver."""
+        self.scene, self.device = scene, scene.dirs.device
+        self._heldout_index, self._heldout_peaks = None, {}
+        if scene.heldout is not None:
+            h = scene.heldout
+            self._heldout_index = fixed_rays(h, self.eval_rays_per_view, self.seed + 2)
+            self._heldout_peaks["deflection"] = value_range(h.eps)  # PSNR peaks: the range of every observation
+            if h.ambient.temperature_known:
+                self._heldout_peaks["displacement"] = value_range(view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras))
+        return self
 
     def _timed(self, dt: float) -> None:
         self.iteration += 1
@@ -120,10 +150,10 @@ class IterativeSolver:
         self.load_state_dict(torch.load(path, map_location=self.device, weights_only=False))
 
     # --- loop ---
-    def fit(self, *, eval_every: int, checkpoint_every: int, checkpoint: Optional[Path] = None,
+    def fit(self, *, checkpoint_every: int, checkpoint: Optional[Path] = None,
             on_eval: Optional[Callable[[dict], None]] = None, on_step: Optional[Callable[[int, dict], None]] = None,
             progress: bool = True) -> dict:
-        """Run to ``iterations``; evaluates every ``eval_every`` and at the end, checkpoints every
+        """Run to ``iterations``; evaluates every :attr:`eval_every` and at the end, checkpoints every
         ``checkpoint_every`` (atomically) and on Ctrl-C. An exception from ``step`` leaves the last good
         checkpoint in place."""
         from tqdm import tqdm
@@ -138,7 +168,7 @@ class IterativeSolver:
                 if on_step is not None:
                     on_step(self.iteration, terms)
                 done = self.iteration == self.iterations or terms.get("converged", False)
-                if self.iteration % eval_every == 0 or done:
+                if self.iteration % self.eval_every == 0 or done:
                     last = self.evaluate()
                     if on_eval is not None:
                         on_eval(last)

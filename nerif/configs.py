@@ -1,0 +1,37 @@
+"""Where the configs are, and composing one without the command line.
+
+The configs live in ``conf/`` at the top of the repository (``conf/config.yaml`` and one folder per config
+group). A wheel carries them inside the package as ``nerif/conf`` (see ``setup.py``), so an installed nerif finds
+them from any folder; a source checkout or an editable install reads the repository's ``conf/``.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+from omegaconf import DictConfig, OmegaConf
+
+_PACKAGE = Path(__file__).resolve().parent
+
+
+def config_dir() -> Path:
+    """The folder holding ``config.yaml``: the package's own copy (installed wheel), else the repository's."""
+    for folder in (_PACKAGE / "conf", _PACKAGE.parent / "conf"):
+        if (folder / "config.yaml").is_file():
+            return folder
+    raise FileNotFoundError(f"nerif's configs are missing: neither {_PACKAGE / 'conf'} nor {_PACKAGE.parent / 'conf'} "
+                            "holds config.yaml (reinstall nerif)")
+
+
+def compose(overrides: Sequence[str] = (), config_name: str = "config") -> DictConfig:
+    """The config ``python -m nerif OVERRIDES`` would run with (without Hydra's run folder)."""
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base=None):
+        return hydra_compose(config_name, overrides=list(overrides))
+
+
+def group(cfg: DictConfig, key: str) -> dict:
+    """One config group, resolved, as plain containers: what a registry builds the component from."""
+    return OmegaConf.to_container(cfg[key], resolve=True)

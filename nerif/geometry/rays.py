@@ -1,0 +1,39 @@
+"""Camera rays through the probe box: which pixels of which camera see it, stored concatenated by view.
+
+Rays of all views are kept as one array with ``view_start`` offsets (V + 1,): view v owns rays
+``view_start[v]:view_start[v + 1]``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from nerif.geometry.box import ProbeBox
+from nerif.geometry.camera import Camera
+
+
+def rays_in_box(box: ProbeBox, cameras: list[Camera], device="cpu"):
+    """Directions and pixel indices of the rays of each camera that cross the box.
+
+    Raises a clear error for a camera that does not see the box at all.
+    Returns: origins (V, 3), dirs (N, 3), pixel (N,), view_start (V + 1,).
+    """
+    dirs, pixels, starts = [], [], [0]
+    for cam in cameras:
+        d = cam.pixel_directions(torch.float64).to(device)
+        o = torch.as_tensor(cam.position, dtype=torch.float64, device=device).expand_as(d)
+        hit = box.intersect(o, d)[2]
+        if not hit.any():
+            raise ValueError(f"{cam.name} at {np.round(cam.position, 1)} mm does not see the probe box "
+                             f"{box.extent_mm.tolist()} mm: check the rig geometry and the probe box")
+        idx = hit.nonzero()[:, 0]
+        dirs.append(d[idx].float())
+        pixels.append(idx)
+        starts.append(starts[-1] + len(idx))
+    origins = torch.tensor(np.stack([c.position for c in cameras]), dtype=torch.float32, device=device)
+    return origins, torch.cat(dirs), torch.cat(pixels), torch.tensor(starts, device=device)
+
+
+def view_index(view_start: torch.Tensor) -> torch.Tensor:
+    """(V + 1,) view offsets -> (N,) view of every ray."""
+    return torch.repeat_interleave(torch.arange(len(view_start) - 1, device=view_start.device), view_start.diff())
