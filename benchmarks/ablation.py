@@ -15,13 +15,12 @@ import time
 from pathlib import Path
 
 import torch
-from hydra import compose, initialize_config_dir
 
 from nerif.app import run
+from nerif.configs import compose
 from nerif.io.export import atomic_write, write_json
 from nerif.io.summary import COLUMNS, write_tables
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
 DEFAULT_CELLS = [f"encoder={e} grad={g}" for e in ("none", "frequency", "hash") for g in ("auto", "discrete", "hybrid")]
 
 
@@ -41,16 +40,15 @@ def run_cells(cells: list[str], settings: list[str], out: Path) -> list[dict]:
     """Each cell (a string of overrides, plus ``settings``) through :func:`nerif.app.run`, one after the other in
     this process; returns one row per cell: its metrics, total time and evaluation history."""
     rows = []
-    with initialize_config_dir(config_dir=str(CONF), version_base=None):
-        for i, cell in enumerate(cells):
-            cfg = compose("config", overrides=list(settings) + cell.split() + ["train.progress=false"])
-            t0 = time.perf_counter()
-            m = run(cfg, out / f"{i}_{cell.replace(' ', '_').replace('=', '-')}")
-            row = {"config": cell, "total_time_s": time.perf_counter() - t0,
-                   **{k: m[k] for k, _, _ in COLUMNS if k in m}, "device": m["device"], "history": m["history"]}
-            rows.append(row)
-            print(f"[{i + 1}/{len(cells)}] {cell}: " + ", ".join(
-                f"{h} {f.format(row[k])}" for k, h, f in COLUMNS if k in row), flush=True)
+    for i, cell in enumerate(cells):
+        cfg = compose(list(settings) + cell.split() + ["train.progress=false"])
+        t0 = time.perf_counter()
+        m = run(cfg, out / f"{i}_{cell.replace(' ', '_').replace('=', '-')}")
+        row = {"config": cell, "total_time_s": time.perf_counter() - t0,
+               **{k: m[k] for k, _, _ in COLUMNS if k in m}, "device": m["device"], "history": m["history"]}
+        rows.append(row)
+        print(f"[{i + 1}/{len(cells)}] {cell}: " + ", ".join(
+            f"{h} {f.format(row[k])}" for k, h, f in COLUMNS if k in row), flush=True)
     return rows
 
 

@@ -73,7 +73,7 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     rows = list(csv.DictReader((sweep / "summary.csv").open()))
     assert [row["config"].split(" ")[-1] for row in rows] == ["solver=nerif", "solver=cgls"]
     jobs = sorted(p.parent for p in sweep.glob("*/metrics.json"))
-    assert len(jobs) == 2
+    assert [j.name for j in jobs] == ["0_hash-discrete", "1_cgls-none"]  # run folders named by solver
     for job in jobs:
         m = json.loads((job / "metrics.json").read_text())
         assert m["iterations"] == {"nerif": 6, "cgls": 200}[m["solver"]] and m["temperature_rmse_K"] > 0
@@ -82,6 +82,8 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
 
 @pytest.mark.parametrize("override, message", [
     ("encoder=fourier", "Available options in 'encoder'"),
+    ("encoder.name=fourier", "unknown encoder 'fourier'; registered encoders: frequency, hash, none"),
+    ("solver=cgls solver.regularizer=tv", "needs a weight solver.lam > 0"),
     ("train.rays_per_view=0", "rays per view must be at least 1"),
     ("sampler.samples_per_ray=1", "samples per ray K must be at least 2"),
     ("phantom.T_peak=0.5", "below 1 K"),

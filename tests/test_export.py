@@ -1,3 +1,4 @@
+"""Atomic writes, ParaView volumes."""
 import base64
 import json
 import xml.etree.ElementTree as ET
@@ -35,13 +36,13 @@ def test_atomic_write_leaves_the_old_file_on_failure(tmp_path):
     assert [q.name for q in tmp_path.iterdir()] == ["metrics.json"]
 
 
-def test_written_files_get_the_usual_permissions(tmp_path):
+def test_written_files_get_the_usual_permissions_not_the_temporary_files_private_ones(tmp_path):
     import os
     import stat
 
-    from nerif.io.export import atomic_write
-
-    p = atomic_write(tmp_path / "a.txt", lambda t: open(t, "w").write("x"))
-    mask = os.umask(0)
-    os.umask(mask)
-    assert stat.S_IMODE(p.stat().st_mode) == 0o666 & ~mask
+    old = os.umask(0o022)
+    try:
+        p = atomic_write(tmp_path / "a.txt", lambda t: open(t, "w").write("x"))
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(p.stat().st_mode) == 0o644 and p.read_text() == "x"

@@ -1,6 +1,8 @@
+"""Image formation: warping, diffraction blur, noise, and resampling between pixel grids of one sensor."""
+import numpy as np
 import torch
 
-from nerif.sensing.imaging import add_noise, diffraction_blur, warp
+from nerif.sensing.imaging import add_noise, diffraction_blur, resample, warp
 
 
 def _image():
@@ -35,3 +37,14 @@ def test_diffraction_blur_keeps_the_mean_and_lowers_the_contrast():
     img = _image()
     b = diffraction_blur(img, 6.0)
     assert abs(float(b.mean() - img.mean())) < 1e-3 and b.std() < img.std()
+
+
+def test_resample_takes_block_means_and_keeps_pixel_centres_aligned():
+    u = np.random.default_rng(0).random((8, 12, 2)).astype(np.float32)
+    small = resample(u, 2, 3)
+    np.testing.assert_allclose(small, u.reshape(2, 4, 3, 4, 2).mean((1, 3)), rtol=1e-5)
+    ramp = np.broadcast_to(np.arange(3, dtype=np.float32)[None, :, None], (2, 3, 1)).copy()  # column index
+    big = resample(ramp, 4, 6)  # twice finer: column j of the fine grid sits at (j + 0.5) / 2 - 0.5 coarse
+    np.testing.assert_allclose(big[0, 1:5, 0], [0.25, 0.75, 1.25, 1.75], rtol=1e-6)
+    assert resample(u, 8, 12) is u
+

@@ -14,7 +14,7 @@ from nerif.solvers import SOLVERS, DivergenceError
 from tests.helpers import solver, tiny_config
 
 
-def make_trainer(*overrides, masks=None):
+def neural_solver(*overrides, masks=None):
     """The tiny scene's neural solver (no masks unless given), its weights drawn under seed 0."""
     cfg = tiny_config(*overrides)
     scene = DATASETS.build(group(cfg, "data"))
@@ -23,14 +23,14 @@ def make_trainer(*overrides, masks=None):
 
 
 def test_resuming_a_checkpoint_continues_exactly(tmp_path):
-    straight = make_trainer()
+    straight = neural_solver()
     for _ in range(12):
         straight.step()
-    first = make_trainer()
+    first = neural_solver()
     for _ in range(6):
         first.step()
     first.save(tmp_path / "ck.pt")
-    resumed = make_trainer()
+    resumed = neural_solver()
     resumed.load(tmp_path / "ck.pt")
     assert resumed.iteration == 6
     for _ in range(6):
@@ -40,7 +40,7 @@ def test_resuming_a_checkpoint_continues_exactly(tmp_path):
 
 
 def test_a_diverging_run_stops_and_keeps_the_last_good_checkpoint(tmp_path):
-    tr = make_trainer()
+    tr = neural_solver()
     for _ in range(5):
         tr.step()
     tr.save(tmp_path / "ck.pt")
@@ -52,10 +52,10 @@ def test_a_diverging_run_stops_and_keeps_the_last_good_checkpoint(tmp_path):
 
 
 def test_a_checkpoint_of_another_field_is_refused(tmp_path):
-    tr = make_trainer("encoder=frequency")
+    tr = neural_solver("encoder=frequency")
     tr.save(tmp_path / "ck.pt")
     with pytest.raises(ValueError, match="another field configuration"):
-        make_trainer("encoder=hash").load(tmp_path / "ck.pt")
+        neural_solver("encoder=hash").load(tmp_path / "ck.pt")
 
 
 def test_no_second_order_graph_when_only_the_discrete_term_trains(monkeypatch):
@@ -67,13 +67,13 @@ def test_no_second_order_graph_when_only_the_discrete_term_trains(monkeypatch):
         return auto(field, p, create_graph=create_graph, step_mm=step_mm)
 
     monkeypatch.setitem(GRADIENTS._entries, "auto", spy)
-    tr = make_trainer("grad=discrete")
+    tr = neural_solver("grad=discrete")
     tr.step()
     assert calls == []  # training never touches autograd deflections
     tr.evaluate()
     assert calls and not any(calls)  # monitoring computes them without a graph
     calls.clear()
-    make_trainer("grad=hybrid").step()
+    neural_solver("grad=hybrid").step()
     assert calls == [True]
 
 
@@ -110,7 +110,7 @@ def test_a_view_with_an_empty_2d_mask_trains_on_all_its_rays():
 @pytest.mark.slow
 def test_a_small_reconstruction_cuts_the_error_well_under_half_of_the_ambient_field():
     # a 10 mm blob (peak 1200 K) in a 48 mm box, 6 views with a 2.8 mm pixel footprint, 400 iterations
-    tr = make_trainer("encoder=hash", "phantom.width_mm=10.0", "rig.binning=20", "train.iterations=400",
+    tr = neural_solver("encoder=hash", "phantom.width_mm=10.0", "rig.binning=20", "train.iterations=400",
                       "train.rays_per_view=128")
     while tr.iteration < tr.iterations:
         tr.step()
@@ -123,7 +123,7 @@ def test_a_small_reconstruction_cuts_the_error_well_under_half_of_the_ambient_fi
 def test_only_the_measured_part_is_compared_when_the_scene_says_so():
     from dataclasses import replace
 
-    t = make_trainer()
+    t = neural_solver()
     for _ in range(5):
         t.step()
     idx = torch.arange(40)

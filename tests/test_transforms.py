@@ -69,7 +69,7 @@ def test_deflections_point_out_of_the_hot_flame(frames):
 
 
 def test_scene_from_the_importer():
-    scene = transforms(str(ROOT), PROBE, 1100.0, 1.00007253, binning=8, heldout_split="val")
+    scene = transforms(str(ROOT), PROBE, 1100.0, 1.00007253, sigma_prior=None, binning=8, heldout_split="val")
     assert scene.n_views == 12 and scene.heldout.n_views == 2
     assert not scene.ambient.temperature_known and scene.ambient.delta_thre == 1.0
     assert scene.perpendicular_only and scene.mask_images[0].shape == (160, 90)
@@ -85,12 +85,12 @@ def test_scene_from_the_importer():
 
 
 def test_training_views_held_out_as_novel_views():
-    scene = transforms(str(ROOT), PROBE, 1100.0, 1.00007253, binning=8, heldout_split=None, heldout_views=[3])
+    scene = transforms(str(ROOT), PROBE, 1100.0, 1.00007253, sigma_prior=None, binning=8, heldout_split=None, heldout_views=[3])
     assert scene.n_views == 11 and scene.heldout.n_views == 1
     assert np.allclose(scene.heldout.cameras[0].position, [-565.685, 0.0, -565.685], atol=1e-3)  # 45 degrees
     assert len(scene.mask_images) == 11
     with pytest.raises(ValueError, match="heldout_split=null"):
-        transforms(str(ROOT), PROBE, 1100.0, 1.00007253, binning=8, heldout_views=[3])
+        transforms(str(ROOT), PROBE, 1100.0, 1.00007253, sigma_prior=None, binning=8, heldout_views=[3])
 
 
 def test_masks_back_project_onto_the_authors_3d_mask():
@@ -103,8 +103,8 @@ def test_masks_back_project_onto_the_authors_3d_mask():
 
 def test_bad_dataset_folders(tmp_path):
     with pytest.raises(FileNotFoundError, match="transforms_train.json"):
-        transforms(str(tmp_path), PROBE, 1100.0, 1.00007253)
+        transforms(str(tmp_path), PROBE, 1100.0, 1.00007253, sigma_prior=None)
     with pytest.raises(FileNotFoundError, match="not a folder"):
-        transforms(str(tmp_path / "nope"), PROBE, 1100.0, 1.00007253)
+        transforms(str(tmp_path / "nope"), PROBE, 1100.0, 1.00007253, sigma_prior=None)
     with pytest.raises(ValueError, match="data.root is not set"):
-        transforms("???", PROBE, 1100.0, 1.00007253)
+        transforms("???", PROBE, 1100.0, 1.00007253, sigma_prior=None)

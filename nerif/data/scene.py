@@ -220,7 +220,7 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
         render_step_mm: quadrature step of the observations (default half a rendering voxel).
         cache_dir: where observations are cached, keyed by the config that made them (None: no cache).
     """
-    sense = SENSING.get(sensing)
+    SENSING.get(sensing)  # an unknown name fails here, before any rendering
     sensor = dict(sensor or {}) if sensing == "realistic" else {}  # the only sensing with parameters
     ph = PHANTOMS.build(phantom)
     ambient = Ambient(ph.T0, ph.n0, float(T_max))
@@ -230,8 +230,9 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
     def observe() -> dict:
         fine = supersampled(phantom, render_supersample) if render_supersample > 1 else ph
         delta = torch.as_tensor(fine.delta, dtype=torch.float32, device=device)
-        eps, record = sense(delta, fine.box, cameras, dirs, pixel, view_start, render_step_mm,
-                            cameras[0].binning, cache_dir=cache_dir, **sensor)
+        eps, record = SENSING.build({"name": sensing, **sensor}, delta=delta, box=fine.box, cameras=cameras, dirs=dirs,
+                                    pixel=pixel, view_start=view_start, step_mm=render_step_mm,
+                                    rig_binning=cameras[0].binning, cache_dir=cache_dir)
         return {"eps": eps.cpu().numpy(), **{f"sensing/{k}": v for k, v in (record or {}).items()}}
 
     payload = {"v": _SCENE_CACHE_VERSION, "phantom": phantom, "rig": rig, "step": render_step_mm,

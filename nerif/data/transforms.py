@@ -110,10 +110,9 @@ def optics(pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32
 
 
 @DATASETS.register("transforms")
-def transforms(root: str, probe: dict, T0: float, n0: float, T_max: Optional[float] = None,
-               heldout_split: Optional[str] = "val", heldout_views: Optional[list] = None, binning: int = 4,
-               sigma_prior: Optional[list] = None,
-               pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32.0,
+def transforms(root: str, probe: dict, T0: float, n0: float, *, sigma_prior: Optional[list],
+               T_max: Optional[float] = None, heldout_split: Optional[str] = "val", heldout_views: Optional[list] = None,
+               binning: int = 4, pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32.0,
                background_mm: float = 1600.0, device: str = "cpu") -> Scene:
     """Train on ``transforms_train.json``; hold out ``transforms_<heldout_split>.json`` (None: no held-out views),
     or, with ``heldout_views``, those views of the training split (novel views; ``heldout_split`` must be None).
@@ -122,7 +121,8 @@ def transforms(root: str, probe: dict, T0: float, n0: float, T_max: Optional[flo
         root: the dataset folder. probe: ``shape`` (nx, ny, nz) and ``voxel_mm`` of the reconstruction grid,
             centred on the world origin. T0, n0: ambient state. T_max: None (the files hold deflections of sigma).
         binning: b x b pixel blocks averaged into one ray (1 = every pixel).
-        sigma_prior: (a, b) interval of sigma (the field's prior unless ``field.prior`` is set), None: the default.
+        sigma_prior: (a, b) interval of sigma the dataset's flame lies in (the field's prior unless ``field.prior``
+            is set); None: the field's default.
         pitch_um: pixel pitch, also the length unit of the poses. focal_mm, f_number, background_mm: lens and
             camera-to-background distance (not in the files; used only for displacements and figures).
     """

@@ -55,8 +55,10 @@ def add_noise(image: torch.Tensor, variance: float, generator: Optional[torch.Ge
 
 
 def resample(u: np.ndarray, height: int, width: int) -> np.ndarray:
-    """(h, w, C) field -> (height, width, C), pixel centres aligned: block mean when shrinking, bilinear else."""
+    """(h, w, C) or (h, w) field -> (height, width, C) or (height, width), pixel centres aligned: block mean when
+    shrinking, bilinear else."""
     if u.shape[:2] == (height, width):
         return u
     shrink = height < u.shape[0]
-    return cv2.resize(u, (width, height), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+    out = cv2.resize(u, (width, height), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+    return out.reshape((height, width) + u.shape[2:])  # OpenCV drops a single channel's axis

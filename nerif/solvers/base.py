@@ -66,7 +66,7 @@ class IterativeSolver:
         if self.eval_rays_per_view < 1:
             raise ValueError(f"metrics.eval_rays_per_view must be at least 1, got {self.eval_rays_per_view}")
         self.seed, self.label = int(seed), str(label)
-        self.scene = None
+        self.scene, self.device = None, torch.device("cpu")  # until setup
         self.iteration = 0
         self.history: list[dict] = []
         self.train_seconds = 0.0

@@ -1,0 +1,45 @@
+"""Figures: the slices show the right planes and the error, and they are written as PNG images."""
+import cv2
+import numpy as np
+
+from nerif.geometry import ProbeBox
+from nerif.io.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
+
+BOX = ProbeBox((6, 8, 4), 2.0)
+
+
+def test_slices_show_the_central_xy_plane_and_the_hottest_layer_with_the_error(tmp_path):
+    truth = np.full(BOX.shape, 300.0)
+    truth[2, 5, 1] = 1500.0  # the hottest layer is y index 5
+    rec = truth + 10.0
+    fig = slice_figure(rec, BOX, truth, "test")
+    axes = [a for a in fig.axes if a.images]  # the panels, without their colour bars
+    assert [a.get_title() for a in axes[:3]] == ["reconstruction [K], z = 1.0 mm", "truth [K], z = 1.0 mm",
+                                                 "error [K], z = 1.0 mm"]
+    assert axes[3].get_title() == f"reconstruction [K], y = {BOX.axes()[1][5]:.1f} mm"
+    np.testing.assert_array_equal(axes[3].images[0].get_array(), rec[:, 5, :].T)
+    np.testing.assert_array_equal(axes[2].images[0].get_array(), np.full((8, 6), 10.0))
+    img = cv2.imread(str(save_figure(fig, tmp_path / "slices.png")))
+    assert img is not None and img.shape[0] > 300 and img.std() > 10
+
+
+def test_without_a_truth_only_the_reconstruction_is_shown():
+    fig = slice_figure(np.zeros(BOX.shape), BOX, None, unit="sigma", hot=-1)
+    panels = [a for a in fig.axes if a.images]
+    assert len(panels) == 2 and panels[0].get_title().startswith("reconstruction [sigma]")
+
+
+def test_curves_heldout_and_sensing_figures_render(tmp_path):
+    hist = [{"iteration": i, "wall_time_s": i * 0.1, "temperature_rmse_K": 100.0 / i} for i in (1, 2, 3)]
+    fig = curves_figure(hist, [(1, 1.0), (2, 0.5)])
+    assert fig.axes[1].get_ylabel() == "temperature_rmse_K"
+    obs = np.ones((8, 6, 2))
+    fig = heldout_figure(obs, obs * 0.5, "px", "held out")
+    panels = [a for a in fig.axes if a.images]
+    assert np.nanmax(panels[2].images[0].get_array()) == np.sqrt(2) / 2  # |predicted - observed|
+    rec = {"reference": np.zeros((2, 64, 48), np.uint8), "distorted": np.zeros((2, 64, 48), np.uint8),
+           "u_true": np.zeros((2, 8, 6, 2)), "u_est": np.zeros((2, 8, 6, 2))}
+    rec["u_true"][1, 6, 2] = 1.0
+    fig = sensing_figure(rec, 1, crop_px=16)
+    assert fig.axes[0].images[0].get_array().shape == (16, 16)
+    assert cv2.imread(str(save_figure(fig, tmp_path / "s.png"))) is not None

@@ -1,0 +1,83 @@
+"""The loop every solver shares: evaluation cadence, early stop, checkpoints, Ctrl-C, resume, fixed rays."""
+import pytest
+import torch
+
+from nerif.data import DATASETS
+from nerif.solvers.base import SOLVERS, IterativeSolver, fixed_rays
+
+METRICS = {"flame_threshold_K": 1.0, "eval_rays_per_view": 4}
+
+
+class Halving(IterativeSolver):
+    """A solver whose state halves every step: converged once below ``tol``; Ctrl-C at iteration ``interrupt_at``."""
+
+    name = "halving"
+
+    def __init__(self, iterations=10, eval_every=3, tol=0.0, interrupt_at=None):
+        super().__init__(iterations=iterations, eval_every=eval_every, metrics=METRICS, seed=0, label="halving")
+        self.x, self.tol, self.interrupt_at = 1.0, tol, interrupt_at
+
+    def step(self):
+        if self.iteration == self.interrupt_at:
+            raise KeyboardInterrupt
+        self.x /= 2
+        self._timed(0.001)
+        return {"loss": self.x, "converged": self.x < self.tol}
+
+    def evaluate(self):
+        self.history.append({"iteration": self.iteration, "x": self.x})
+        return self.history[-1]
+
+    def state_dict(self):
+        return {**super().state_dict(), "x": self.x}
+
+    def load_state_dict(self, st):
+        super().load_state_dict(st)
+        self.x = st["x"]
+
+
+def test_evaluates_every_eval_every_and_at_the_end(tmp_path):
+    s = Halving(iterations=10, eval_every=3)
+    last = s.fit(checkpoint_every=4, checkpoint=tmp_path / "ck.pt", progress=False)
+    assert [h["iteration"] for h in s.history] == [3, 6, 9, 10] and last["x"] == 2.0**-10
+    assert torch.load(tmp_path / "ck.pt", weights_only=False)["iteration"] == 10  # the last one, at the end
+    assert s.timing()["iterations"] == 10 and s.timing()["ms_per_iteration"] == pytest.approx(1.0)
+
+
+def test_a_converged_solver_stops_early():
+    s = Halving(iterations=100, eval_every=50, tol=1e-3)
+    s.fit(checkpoint_every=50, progress=False)
+    assert s.iteration == 10 and s.history[-1]["iteration"] == 10  # 2^-10 < 1e-3
+
+
+def test_ctrl_c_saves_a_checkpoint_that_resumes_exactly(tmp_path):
+    s = Halving(iterations=10, interrupt_at=5)
+    with pytest.raises(KeyboardInterrupt):
+        s.fit(checkpoint_every=100, checkpoint=tmp_path / "ck.pt", progress=False)
+    resumed = Halving(iterations=10)
+    resumed.load(tmp_path / "ck.pt")
+    assert resumed.iteration == 5 and resumed.x == 2.0**-5
+    resumed.fit(checkpoint_every=100, progress=False)
+    assert resumed.x == 2.0**-10 and [h["iteration"] for h in resumed.history] == [3, 6, 9, 10]
+
+
+def test_a_missing_checkpoint_and_bad_settings_are_one_sentence(tmp_path):
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        Halving().load(tmp_path / "nope.pt")
+    with pytest.raises(ValueError, match="iterations must be at least 1"):
+        Halving(iterations=0)
+    with pytest.raises(ValueError, match="evaluations every 0 iterations"):
+        Halving(eval_every=0)
+
+
+def test_fixed_rays_are_per_view_and_seeded():
+    scene = DATASETS.build({"name": "synthetic", "render_supersample": 1, "T_max": 2000.0,
+                            "rig": {"name": "arc", "n_cameras": 3, "binning": 40},
+                            "phantom": {"name": "gaussian_blob", "shape": [16, 16, 16], "voxel_mm": 2.0}})
+    a, b, c = fixed_rays(scene, 5, 0), fixed_rays(scene, 5, 0), fixed_rays(scene, 5, 1)
+    assert torch.equal(a, b) and not torch.equal(a, c) and len(a) == 15 and len(set(a.tolist())) == 15
+    assert scene.ray_views()[a].tolist() == [0] * 5 + [1] * 5 + [2] * 5
+
+
+def test_the_registry_holds_both_solvers():
+    assert SOLVERS.names() == ["cgls", "nerif"]

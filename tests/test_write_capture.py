@@ -1,0 +1,31 @@
+"""``python -m nerif.write_capture``: a capture folder whose rig file describes the cameras that made it."""
+import numpy as np
+import pytest
+import yaml
+
+from nerif.data.capture import RIG_FILE, capture_files, read_rig
+from nerif.write_capture import main
+
+SMALL = ["rig.width_px=240", "rig.height_px=320", "rig.binning=8", "rig.n_cameras=3", "rig.distance_mm=700",
+         "rig.background_behind_mm=500", "rig.f_number=16", "phantom=gaussian_blob", "phantom.shape=[16,16,16]",
+         "phantom.voxel_mm=2.0", "phantom.width_mm=6.0", "data.sensor.aperture_rays=4", "data.render_supersample=1",
+         "data.cache_dir=null"]
+
+
+def test_the_rig_file_describes_the_cameras_that_took_the_images(tmp_path, capsys):
+    root = main([str(tmp_path / "cap"), *SMALL])
+    assert "python -m nerif data=capture data.root=" in capsys.readouterr().out
+    rig = read_rig(root)
+    cam = rig["camera"]
+    assert cam["sensor_px"] == [240, 320] and cam["focal_mm"] == 105.0 and cam["f_number"] == 16.0
+    assert cam["pitch_um"] == pytest.approx(20.0)  # images on the full sensor
+    assert cam["camera_to_centre_mm"] == pytest.approx(700.0) and cam["camera_to_background_mm"] == pytest.approx(1200.0)
+    assert rig["views"]["angles_deg"] == pytest.approx([0.0, 82.5, 165.0]) and rig["heldout"] == [2]
+    assert rig["probe"] == {"shape": [16, 16, 16], "voxel_mm": 2.0}
+    distorted, references = capture_files(root, rig)
+    assert len(distorted) == len(references) == 3
+    assert yaml.safe_load((root / RIG_FILE).read_text())["T_max"] == 2000.0
+    import cv2
+
+    img = cv2.imread(str(distorted[0]), cv2.IMREAD_UNCHANGED)
+    assert img.shape == (320, 240) and img.dtype == np.uint8 and img.std() > 30
