@@ -77,7 +77,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     finally:
         writer.close()
 
-    metrics = write_outputs(solver, scene, cfg, out_dir, losses)
+    metrics = write_outputs(solver, scene, out_dir, losses)
     metrics.update(setup_time_s=setup_s, device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
     if device.type == "cuda":
         metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
@@ -133,7 +133,7 @@ def write_heldout(solver, scene, out_dir: Path) -> dict:
     return solver.heldout_errors(torch.arange(len(h.dirs), device=h.dirs.device), pred)
 
 
-def write_outputs(solver, scene, cfg: DictConfig, out_dir: Path, losses) -> dict:
+def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     """Volumes (.npz, .vti), slice and curve PNGs, held-out figures, and the metrics of the final state."""
     amb, box = scene.ambient, scene.box
     sigma = solver.reconstruction()
