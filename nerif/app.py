@@ -159,6 +159,7 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     final["wall_time_s"] = solver.train_seconds
     final["history"] = solver.history
     final.update(solver.labels)
+    final.update(solver.report)
     if scene.sensing is not None:
         final["displacement_rmse_px"] = float(scene.sensing["displacement_rmse_px"])
         final["circle_of_confusion_px"] = float(scene.sensing["circle_of_confusion_px"])

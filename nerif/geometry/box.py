@@ -92,13 +92,28 @@ class ProbeBox:
         return t_near, t_far, t_far > t_near + 1e-9
 
 
-def face_axes(faces) -> list[int]:
-    """Axis names of box faces (``x``, ``y``, ``z``: both faces of that axis) -> axis indices."""
-    axes = {"x": 0, "y": 1, "z": 2}
-    unknown = [f for f in faces if f not in axes]
-    if unknown:
-        raise ValueError(f"ambient faces must be among x, y, z; got {unknown}")
-    return [axes[f] for f in faces]
+FACES = ("-x", "+x", "-y", "+y", "-z", "+z")
+
+
+def box_faces(faces) -> list[tuple[int, int]]:
+    """Names of box faces -> (axis, side) pairs, side -1 or +1. ``-x``/``+x`` name one face, ``x`` both faces of
+    that axis (likewise y, z); the result is sorted and without repeats."""
+    out = set()
+    for f in faces:
+        f = str(f)
+        if f in ("x", "y", "z"):
+            out |= {("xyz".index(f), -1), ("xyz".index(f), 1)}
+        elif f in FACES:
+            out.add(("xyz".index(f[1]), -1 if f[0] == "-" else 1))
+        else:
+            raise ValueError(f"ambient faces must be among x, y, z (both faces of an axis) or {', '.join(FACES)}; "
+                             f"got '{f}'")
+    return sorted(out)
+
+
+def face_names(faces: list[tuple[int, int]]) -> list[str]:
+    """(axis, side) pairs -> names (``-x``, ``+z``, ...)."""
+    return [("-" if side < 0 else "+") + "xyz"[axis] for axis, side in faces]
 
 
 def sample_volume(volume: torch.Tensor, box: ProbeBox, p: torch.Tensor, padding: str = "zeros") -> torch.Tensor:

@@ -5,7 +5,7 @@ from typing import Mapping, Optional, Sequence
 
 import torch
 
-from nerif.geometry import ProbeBox, face_axes
+from nerif.geometry import ProbeBox, box_faces
 
 
 
@@ -43,26 +43,26 @@ class AmbientBoundary:
 
     Args:
         box: the probe box.
-        faces: axes whose two faces are ambient, e.g. ``("x", "z")`` for the lateral faces of a flame
-            burning along y. Empty: no condition.
+        faces: the ambient faces, e.g. ``("x", "z", "-y")`` for the lateral faces and the bottom of a flame
+            burning along y (``x``: both faces of that axis; see :func:`nerif.geometry.box_faces`). Empty: no
+            condition.
         weight: loss weight (normalised units, beside the deflection MSE).
         points: face points per iteration.
     """
 
     def __init__(self, box: ProbeBox, faces: Sequence[str] = ("x",), weight: float = 0.05, points: int = 256):
-        self.box, self.axes, self.weight, self.points = box, face_axes(faces), float(weight), int(points)
+        self.box, self.faces, self.weight, self.points = box, box_faces(faces), float(weight), int(points)
 
     @property
     def active(self) -> bool:
-        return bool(self.axes) and self.weight > 0 and self.points > 0
+        return bool(self.faces) and self.weight > 0 and self.points > 0
 
     def sample(self, generator: Optional[torch.Generator], device) -> torch.Tensor:
-        """(points, 3) uniform points on the ambient faces [mm]."""
+        """(points, 3) points uniform on each ambient face, the faces drawn evenly [mm]."""
         g = torch.rand(self.points, 3, generator=generator, device=device) * 2 - 1
-        axis = torch.as_tensor(self.axes, device=device)[
-            torch.randint(len(self.axes), (self.points,), generator=generator, device=device)]
-        side = torch.randint(2, (self.points,), generator=generator, device=device) * 2 - 1
-        g[torch.arange(self.points, device=device), axis] = side.float()
+        faces = torch.as_tensor(self.faces, device=device)[
+            torch.randint(len(self.faces), (self.points,), generator=generator, device=device)]
+        g[torch.arange(self.points, device=device), faces[:, 0]] = faces[:, 1].to(g.dtype)
         return self.box.from_grid(g)
 
     def __call__(self, field, generator: Optional[torch.Generator] = None) -> torch.Tensor:

@@ -18,7 +18,9 @@ from typing import Callable, Mapping, Optional
 import numpy as np
 import torch
 
+from nerif.geometry import box_faces
 from nerif.io.export import atomic_save_torch
+from nerif.masks.backprojection import ambient_faces
 from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
 from nerif.registry import Registry
 from nerif.sensing.displacement import view_displacements
@@ -30,6 +32,14 @@ _COUNTERS = ("iteration", "history", "train_seconds", "step_times")
 
 class DivergenceError(RuntimeError):
     """The loss became NaN or infinite."""
+
+
+def check_faces(setting) -> None:
+    """``auto`` or a list of face names (:func:`nerif.geometry.box_faces`); raises one sentence otherwise."""
+    if setting != "auto":
+        if isinstance(setting, str):
+            raise ValueError(f"loss.ambient_faces must be auto or a list of faces such as [x, -y], got '{setting}'")
+        box_faces(setting)
 
 
 def fixed_rays(scene, per_view: int, seed: int) -> torch.Tensor:
@@ -72,6 +82,7 @@ class IterativeSolver:
         self.train_seconds = 0.0
         self.step_times: list[float] = []
         self.labels = {"solver": self.name}  # what this run is, for outputs and tables
+        self.report: dict = {}  # what the solver decided from the data, for metrics.json
 
     def setup(self, scene, masks) -> "IterativeSolver":
         """Give the solver its data: the scene (rays, observations, held-out views) and the masks. Subclasses
@@ -85,6 +96,25 @@ class IterativeSolver:
             if h.ambient.temperature_known:
                 self._heldout_peaks["displacement"] = value_range(view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras))
         return self
+
+    def resolve_ambient_faces(self, setting, masks, min_cover: float, fallback) -> list[str]:
+        """The faces held at ambient: ``setting`` (a list), or with ``auto`` every face the flame does not cross,
+        ``fallback`` where the visual hull covers every face (:func:`nerif.masks.backprojection.ambient_faces`);
+        the decision is logged and reported."""
+        faces, crossed = ambient_faces(setting, self.scene, masks, min_cover, fallback)
+        self.report.update(ambient_faces=faces, flame_crosses_faces=crossed)
+        if setting == "auto" and len(crossed) == 6:
+            log.warning("the visual hull covers every face of the probe box (noisy or smoothed deflections?): sigma "
+                        "= 0 on %s (loss.ambient_fallback); set loss.ambient_faces to the faces known to be "
+                        "ambient", ", ".join(faces))
+        if crossed:
+            log.info("the flame crosses the probe box at %s (visual hull); ambient faces: %s%s", ", ".join(crossed),
+                     ", ".join(faces) or "none", " (auto)" if setting == "auto" else "")
+        both = sorted(set(crossed) & set(faces))
+        if both:
+            log.warning("loss.ambient_faces holds sigma = 0 on %s, which the flame crosses: use "
+                        "loss.ambient_faces=auto", ", ".join(both))
+        return faces
 
     def _timed(self, dt: float) -> None:
         self.iteration += 1

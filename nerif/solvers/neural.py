@@ -11,12 +11,11 @@ import torch
 from nerif.data import Scene
 from nerif.encoders import ENCODERS
 from nerif.field import NeuralField, prior_interval
-from nerif.geometry import face_axes
 from nerif.losses import AmbientBoundary, deflection_terms, weighted_sum
 from nerif.metrics import deflection_rmse
 from nerif.renderers import SAMPLERS, render_deflections
 from nerif.renderers.samplers import UniformSampler
-from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, fixed_rays
+from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_faces, fixed_rays
 
 
 @SOLVERS.register("nerif")
@@ -29,8 +28,9 @@ class NeuralSolver(IterativeSolver):
         encoder: an :data:`ENCODERS` config. field: ``hidden`` widths and ``prior`` interval of the MLP
             (null: the data's own, else :data:`nerif.field.DEFAULT_PRIOR`).
         grad: ``weights``, gradient operator -> loss weight (lambda_a for ``auto``, lambda_d for ``discrete``).
-        sampler: a :data:`SAMPLERS` config. loss: the ambient boundary condition (``ambient_faces``,
-            ``ambient_weight``, ``ambient_points``; see :class:`nerif.losses.AmbientBoundary`).
+        sampler: a :data:`SAMPLERS` config. loss: the ambient boundary condition (``ambient_faces``: ``auto`` or
+            a list, ``crossed_cover``, ``ambient_fallback``, ``ambient_weight``, ``ambient_points``; see
+            :class:`nerif.losses.AmbientBoundary` and :meth:`IterativeSolver.resolve_ambient_faces`).
         train: ``iterations``, ``eval_every``, ``rays_per_view``, ``outside_fraction`` (share of each batch drawn
             from the view's rays outside its 2-D mask), and Adam's ``lr``, ``betas``, ``eps`` with the cosine
             floor ``lr_min``.
@@ -52,7 +52,8 @@ class NeuralSolver(IterativeSolver):
         self.weights = {k: float(v) for k, v in grad["weights"].items()}
         if not any(w > 0 for w in self.weights.values()):
             raise ValueError("every gradient-loss weight is zero: nothing to train on (set grad.weights)")
-        face_axes(loss["ambient_faces"])
+        check_faces(loss["ambient_faces"])
+        check_faces(loss["ambient_fallback"])
         self.encoder = ENCODERS.build(encoder)
         self.sampler = SAMPLERS.build(sampler)
         self.hidden, self.prior = tuple(field["hidden"]), field["prior"]
@@ -66,8 +67,9 @@ class NeuralSolver(IterativeSolver):
         super().setup(scene, masks)
         prior = prior_interval(self.prior, scene.sigma_prior)
         self.field = NeuralField(self.encoder, scene.box, hidden=self.hidden, prior=prior, gate=masks.gate).to(self.device)
-        b = AmbientBoundary(scene.box, list(self.loss_cfg["ambient_faces"]), self.loss_cfg["ambient_weight"],
-                            self.loss_cfg["ambient_points"])
+        lc = self.loss_cfg
+        faces = self.resolve_ambient_faces(lc["ambient_faces"], masks, lc["crossed_cover"], lc["ambient_fallback"])
+        b = AmbientBoundary(scene.box, faces, lc["ambient_weight"], lc["ambient_points"])
         self.boundary = b if b.active else None
         self.pools = self._pools(scene, masks.inside, self.outside_fraction)
         oc = self.optim_cfg

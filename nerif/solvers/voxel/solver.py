@@ -8,22 +8,22 @@ from typing import Mapping, Optional
 import numpy as np
 import torch
 
-from nerif.geometry import face_axes
+from nerif.geometry import box_faces
 from nerif.renderers.deflection import perpendicular
 from nerif.renderers.voxel import voxel_deflection
-from nerif.solvers.base import SOLVERS, IterativeSolver
+from nerif.solvers.base import SOLVERS, IterativeSolver, check_faces
 from nerif.solvers.voxel.cgls import CGLS, REGULARIZERS
 from nerif.solvers.voxel.projector import PROJECTORS, SparseProjector
 
 
 def boundary_mask(shape, faces) -> np.ndarray:
-    """(nx, ny, nz) bool, False on the given faces of the grid (``x``, ``y``, ``z``: both faces of that axis)."""
+    """(nx, ny, nz) bool, False on the voxels of the given faces of the grid (names as
+    :func:`nerif.geometry.box_faces`: ``x`` both faces of that axis, ``-x`` one)."""
     keep = np.ones(shape, bool)
-    for axis in face_axes(faces):
+    for axis, side in box_faces(faces):
         idx = [slice(None)] * 3
-        for end in (0, -1):
-            idx[axis] = end
-            keep[tuple(idx)] = False
+        idx[axis] = 0 if side < 0 else -1
+        keep[tuple(idx)] = False
     return keep
 
 
@@ -54,7 +54,8 @@ class CGLSSolver(IterativeSolver):
         iterations: CGLS iterations (upper bound). eval_every, metrics, seed, label: see :class:`IterativeSolver`.
         regularizer, lam, reweight_every, tv_eps: see :class:`nerif.solvers.voxel.cgls.CGLS`.
         tol: stop once |b - A x| / |b| falls below it (discrepancy principle; None: run all iterations).
-        ambient_faces: axes whose two faces are held at sigma = 0 (``loss.ambient_faces``).
+        ambient_faces, crossed_cover, ambient_fallback: the faces held at sigma = 0 (``loss.ambient_faces``: ``auto`` or a list; see
+            :meth:`IterativeSolver.resolve_ambient_faces`).
         projector: ``sparse``, ``matrix_free`` or ``auto`` (sparse when its matrix fits in ``max_matrix_gib``).
         step_mm, chunk: projector quadrature step and rays per batch. dtype: ``float32`` or ``float64``.
     """
@@ -62,7 +63,7 @@ class CGLSSolver(IterativeSolver):
     name = "cgls"
 
     def __init__(self, *, iterations: int, eval_every: int, regularizer: str, lam: float, tol: Optional[float],
-                 reweight_every: int, tv_eps: float, ambient_faces, projector: str, max_matrix_gib: float,
+                 reweight_every: int, tv_eps: float, ambient_faces, crossed_cover: float, ambient_fallback, projector: str, max_matrix_gib: float,
                  step_mm: Optional[float], chunk: int, dtype: str, metrics: Mapping, seed: int, label: str):
         super().__init__(iterations=iterations, eval_every=eval_every, metrics=metrics, seed=seed, label=label)
         if REGULARIZERS.build({"name": regularizer}) is not None and not lam > 0:
@@ -71,10 +72,11 @@ class CGLSSolver(IterativeSolver):
             PROJECTORS.get(projector)
         if dtype not in ("float32", "float64"):
             raise ValueError(f"solver.dtype must be float32 or float64, got '{dtype}'")
-        face_axes(ambient_faces)
+        check_faces(ambient_faces)
         self.regularizer, self.lam, self.tol = regularizer, float(lam), tol
         self.reweight_every, self.tv_eps = int(reweight_every), float(tv_eps)
-        self.ambient_faces = list(ambient_faces)
+        check_faces(ambient_fallback)
+        self.ambient_setting, self.crossed_cover, self.ambient_fallback = ambient_faces, float(crossed_cover), ambient_fallback
         self.projector_name, self.max_matrix_gib = projector, float(max_matrix_gib)
         self.step_mm, self.chunk, self.dtype = step_mm, int(chunk), getattr(torch, dtype)
         self.labels.update(regularizer=regularizer, lam=float(lam))
@@ -92,7 +94,8 @@ class CGLSSolver(IterativeSolver):
             projector = "sparse" if fits else "matrix_free"
         self.projector = built_projector(projector, scene.box, origins, scene.dirs.to(dt), self.step_mm, self.chunk)
         self.projector_name = projector
-        unknown = boundary_mask(scene.box.shape, self.ambient_faces)
+        faces = self.resolve_ambient_faces(self.ambient_setting, masks, self.crossed_cover, self.ambient_fallback)
+        unknown = boundary_mask(scene.box.shape, faces)
         if masks.volume is not None:
             unknown &= np.asarray(masks.volume) > 0.5
         if not unknown.any():
