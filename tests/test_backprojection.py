@@ -94,10 +94,10 @@ def test_the_faces_the_flame_crosses_are_the_hot_faces_of_the_phantom(phantom, c
     hot = [f for f in FACES for a, s in box_faces([f])
            if (np.take(scene.truth_T, 0 if s < 0 else -1, axis=a) - scene.ambient.T0).max() > 50.0]
     assert crossed_faces(masks.volume, 0.1) == crossed == hot
-    ambient, found = ambient_faces("auto", scene, masks, 0.1)
+    ambient, found = ambient_faces("auto", scene, masks, 0.1, ["x"])
     assert found == crossed and sorted(ambient + crossed) == sorted(FACES)
-    assert ambient_faces("auto", scene, MASKS.build({"name": "none"}, scene=scene), 0.1) == (ambient, crossed)
-    assert ambient_faces(["x"], scene, masks, 0.1) == (["-x", "+x"], crossed)
+    assert ambient_faces("auto", scene, MASKS.build({"name": "none"}, scene=scene), 0.1, ["x"]) == (ambient, crossed)
+    assert ambient_faces(["x"], scene, masks, 0.1, ["x"]) == (["-x", "+x"], crossed)
     everywhere = Masks(volume=np.ones(scene.box.shape, bool))  # a hull that covers every face: the data do not tell
     assert ambient_faces("auto", scene, everywhere, 0.1, fallback=["z"]) == (["-z", "+z"], list(FACES))
 
@@ -136,4 +136,4 @@ def test_noise_neither_fills_the_masks_nor_hides_the_ambient_faces(scene):
     masks = MASKS.build({"name": "3d"}, scene=noisy)
     flame = scene.truth_T - scene.ambient.T0 > 100.0
     assert masks.volume[flame].all() and masks.volume.sum() < 1.5 * clean.volume.sum()
-    assert ambient_faces("auto", noisy, masks, 0.1) == (list(FACES), [])
+    assert ambient_faces("auto", noisy, masks, 0.1, ["x"]) == (list(FACES), [])

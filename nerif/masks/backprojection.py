@@ -113,7 +113,7 @@ def crossed_faces(hull: np.ndarray, min_cover: float) -> list[str]:
     return out
 
 
-def ambient_faces(setting, scene, masks: Masks, min_cover: float, fallback=("x",)) -> tuple[list[str], list[str]]:
+def ambient_faces(setting, scene, masks: Masks, min_cover: float, fallback) -> tuple[list[str], list[str]]:
     """The faces held at ambient (sigma = 0) and the faces the flame crosses.
 
     Args:
