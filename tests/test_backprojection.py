@@ -77,6 +77,11 @@ def test_holes_open_to_one_side_are_filled_and_background_reaching_two_sides_is_
     ring[3:9, 3:9] = True
     ring[5:7, 5:7] = False
     assert fill_holes(ring, region)[5:7, 5:7].all()  # an enclosed core, as before
+    stairs = region.copy()
+    stairs[10, 1:7] = False  # a slanted bottom edge, one pixel higher on the left: the notch meets a step of it
+    notch = np.ones_like(region) & stairs
+    notch[5:11, 7:9] = False  # reaches the bottom edge right at the step, so one pixel also has outside to its left
+    assert fill_holes(notch, stairs)[5:11, 7:9].all()  # still one side (bottom): a step is no second side
     two = np.zeros_like(region)
     two[1:11, 3:5] = two[1:11, 8:10] = True  # two flames through the whole height: the gap is ambient
     assert not fill_holes(two, region)[:, 5:8].any()

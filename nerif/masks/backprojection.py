@@ -15,22 +15,29 @@ def fill_holes(mask: np.ndarray, region: np.ndarray) -> np.ndarray:
     """Fill the holes of a 2-D mask inside the region the view's rays cover (the probe box's image).
 
     A hole is a connected part of ``region`` outside ``mask`` (4-connected) that touches the edge of the region on
-    at most one side (up, down, left or right). Enclosed holes are the barely deflected core of a symmetric flame;
-    the one-sided ones are the same core where the probe box cuts the flame: the cut opens the core to one edge of
-    the box's image (a notch), and a notch left open would carve hot gas out of the visual hull. Background that
-    reaches two sides or more (around a flame, between two flames) is ambient and stays outside.
+    at most one side: top, bottom, left or right, whichever side of the region's bounding rectangle the contact
+    pixel is nearest to (the box's image has slanted, stair-stepped edges). Enclosed holes are the barely deflected
+    core of a symmetric flame; the one-sided ones are the same core where the probe box cuts the flame: the cut
+    opens the core to one edge of the box's image (a notch), and a notch left open would carve hot gas out of the
+    visual hull. Background that reaches two sides or more (around a flame, between two flames) stays ambient.
 
     Args:
         mask, region: (height, width) bool. Returns: (height, width) bool, ``mask`` with its holes filled.
     """
     background = region & ~mask
+    if not background.any():
+        return mask.copy()
     n, labels = cv2.connectedComponents(background.astype(np.uint8), connectivity=4)
     outside = ~np.pad(region, 1)  # beyond the image counts as outside the region
     H, W = region.shape
+    touching = np.zeros((H, W), bool)
+    for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        touching |= outside[1 + dr:1 + dr + H, 1 + dc:1 + dc + W]
+    r, c = np.nonzero(background & touching)
+    rows, cols = np.nonzero(region)
+    side = np.argmin(np.stack([r - rows.min(), rows.max() - r, c - cols.min(), cols.max() - c]), axis=0)
     sides = np.zeros((n, 4), bool)
-    for k, (dr, dc) in enumerate(((-1, 0), (1, 0), (0, -1), (0, 1))):
-        edge = background & outside[1 + dr:1 + dr + H, 1 + dc:1 + dc + W]
-        sides[np.unique(labels[edge]), k] = True
+    sides[labels[r, c], side] = True
     hole = sides.sum(1) <= 1
     hole[0] = False  # label 0: not background
     return mask | (hole[labels] & background)
