@@ -85,6 +85,8 @@ def test_no_second_order_graph_when_only_the_discrete_term_trains(monkeypatch):
     ("grad.weights.discrete=0", "every gradient-loss weight is zero"),
     ("encoder.log2_table_size=30", "log2_table_size must be within"),
     ("loss.ambient_faces=[w]", "ambient faces"),
+    ("loss.ambient_faces=everywhere", "loss.ambient_faces must be auto or a list of faces"),
+    ("loss.ambient_fallback=auto", "loss.ambient_fallback must be a list of faces"),
 ])
 def test_settings_are_checked_before_any_data(override, message):
     with pytest.raises(ValueError, match=message):

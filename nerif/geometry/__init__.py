@@ -3,5 +3,5 @@ from nerif.geometry.box import FACES, ProbeBox, box_faces, face_names, sample_vo
 from nerif.geometry.camera import RIGS, Camera, arc_rig, camera_from_nerf_pose, look_at_origin
 from nerif.geometry.rays import rays_in_box, view_index
 
-__all__ = ["FACES", "ProbeBox", "box_faces", "face_names", "sample_volume", "RIGS", "Camera", "arc_rig", "camera_from_nerf_pose",
-           "look_at_origin", "rays_in_box", "view_index"]
+__all__ = ["FACES", "ProbeBox", "box_faces", "face_names", "sample_volume", "RIGS", "Camera", "arc_rig",
+           "camera_from_nerf_pose", "look_at_origin", "rays_in_box", "view_index"]

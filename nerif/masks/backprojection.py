@@ -54,7 +54,8 @@ def noise_level(eps_image: np.ndarray) -> float:
     return float(1.4826 * np.median(d) / np.sqrt(6.0)) if d.size else 0.0
 
 
-def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2, noise_sigmas: float = 4.0) -> list[np.ndarray]:
+def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2,
+                     noise_sigmas: float = 4.0) -> list[np.ndarray]:
     """Per view: ``|eps|^2 / max |eps|^2 > threshold`` and ``|eps| > noise_sigmas`` times the view's noise level
     (:func:`noise_level` per component, so ``|eps|^2 > 3 noise_sigmas^2 sigma_n^2``: on noisy data the relative
     threshold alone would take every pixel), dilated by a disc of ``radius_px`` pixels, holes filled
@@ -70,7 +71,8 @@ def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2, noise_
         mag2 = (eps**2).sum(-1)
         peak = mag2.max() if mag2.size else 0.0
         floor = 3.0 * (noise_sigmas * noise_level(scene.view_image(v, eps, np.nan))) ** 2
-        keep = (mag2 > threshold * peak) & (mag2 > floor) if peak > 0 and np.isfinite(peak) else np.zeros(len(eps), bool)
+        signal = peak > 0 and np.isfinite(peak)
+        keep = (mag2 > threshold * peak) & (mag2 > floor) if signal else np.zeros(len(eps), bool)
         m = (scene.view_image(v, keep.astype(np.float64)) > 0).astype(np.uint8)
         if radius_px > 0:
             disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))

@@ -17,7 +17,6 @@ from nerif.registry import Registry
 MASKS = Registry("mask", package="nerif.masks")
 
 
-
 @dataclass
 class Masks:
     """Attributes:

@@ -34,12 +34,13 @@ class DivergenceError(RuntimeError):
     """The loss became NaN or infinite."""
 
 
-def check_faces(setting) -> None:
-    """``auto`` or a list of face names (:func:`nerif.geometry.box_faces`); raises one sentence otherwise."""
-    if setting != "auto":
-        if isinstance(setting, str):
-            raise ValueError(f"loss.ambient_faces must be auto or a list of faces such as [x, -y], got '{setting}'")
-        box_faces(setting)
+def check_faces(setting, key: str = "loss.ambient_faces", auto: bool = True) -> None:
+    """A list of face names (:func:`nerif.geometry.box_faces`), or ``auto`` where allowed; one sentence otherwise."""
+    if auto and setting == "auto":
+        return
+    if isinstance(setting, str):
+        raise ValueError(f"{key} must be {'auto or ' if auto else ''}a list of faces such as [x, -y], got '{setting}'")
+    box_faces(setting)
 
 
 def fixed_rays(scene, per_view: int, seed: int) -> torch.Tensor:
@@ -94,7 +95,8 @@ class IterativeSolver:
             self._heldout_index = fixed_rays(h, self.eval_rays_per_view, self.seed + 2)
             self._heldout_peaks["deflection"] = value_range(h.eps)  # PSNR peaks: the range of every observation
             if h.ambient.temperature_known:
-                self._heldout_peaks["displacement"] = value_range(view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras))
+                u = view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras)
+                self._heldout_peaks["displacement"] = value_range(u)
         return self
 
     def resolve_ambient_faces(self, setting, masks, min_cover: float, fallback) -> list[str]:

@@ -53,7 +53,7 @@ class NeuralSolver(IterativeSolver):
         if not any(w > 0 for w in self.weights.values()):
             raise ValueError("every gradient-loss weight is zero: nothing to train on (set grad.weights)")
         check_faces(loss["ambient_faces"])
-        check_faces(loss["ambient_fallback"])
+        check_faces(loss["ambient_fallback"], "loss.ambient_fallback", auto=False)
         self.encoder = ENCODERS.build(encoder)
         self.sampler = SAMPLERS.build(sampler)
         self.hidden, self.prior = tuple(field["hidden"]), field["prior"]
@@ -66,7 +66,8 @@ class NeuralSolver(IterativeSolver):
         draws from (``masks.inside``)."""
         super().setup(scene, masks)
         prior = prior_interval(self.prior, scene.sigma_prior)
-        self.field = NeuralField(self.encoder, scene.box, hidden=self.hidden, prior=prior, gate=masks.gate).to(self.device)
+        self.field = NeuralField(self.encoder, scene.box, hidden=self.hidden, prior=prior, gate=masks.gate)
+        self.field.to(self.device)
         lc = self.loss_cfg
         faces = self.resolve_ambient_faces(lc["ambient_faces"], masks, lc["crossed_cover"], lc["ambient_fallback"])
         b = AmbientBoundary(scene.box, faces, lc["ambient_weight"], lc["ambient_points"])

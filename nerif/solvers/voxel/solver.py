@@ -54,7 +54,8 @@ class CGLSSolver(IterativeSolver):
         iterations: CGLS iterations (upper bound). eval_every, metrics, seed, label: see :class:`IterativeSolver`.
         regularizer, lam, reweight_every, tv_eps: see :class:`nerif.solvers.voxel.cgls.CGLS`.
         tol: stop once |b - A x| / |b| falls below it (discrepancy principle; None: run all iterations).
-        ambient_faces, crossed_cover, ambient_fallback: the faces held at sigma = 0 (``loss.ambient_faces``: ``auto`` or a list; see
+        ambient_faces, crossed_cover, ambient_fallback: the faces held at sigma = 0 (``loss.ambient_faces``:
+            ``auto`` or a list; see
             :meth:`IterativeSolver.resolve_ambient_faces`).
         projector: ``sparse``, ``matrix_free`` or ``auto`` (sparse when its matrix fits in ``max_matrix_gib``).
         step_mm, chunk: projector quadrature step and rays per batch. dtype: ``float32`` or ``float64``.
@@ -63,7 +64,8 @@ class CGLSSolver(IterativeSolver):
     name = "cgls"
 
     def __init__(self, *, iterations: int, eval_every: int, regularizer: str, lam: float, tol: Optional[float],
-                 reweight_every: int, tv_eps: float, ambient_faces, crossed_cover: float, ambient_fallback, projector: str, max_matrix_gib: float,
+                 reweight_every: int, tv_eps: float, ambient_faces, crossed_cover: float, ambient_fallback,
+                 projector: str, max_matrix_gib: float,
                  step_mm: Optional[float], chunk: int, dtype: str, metrics: Mapping, seed: int, label: str):
         super().__init__(iterations=iterations, eval_every=eval_every, metrics=metrics, seed=seed, label=label)
         if REGULARIZERS.build({"name": regularizer}) is not None and not lam > 0:
@@ -73,10 +75,11 @@ class CGLSSolver(IterativeSolver):
         if dtype not in ("float32", "float64"):
             raise ValueError(f"solver.dtype must be float32 or float64, got '{dtype}'")
         check_faces(ambient_faces)
+        check_faces(ambient_fallback, "loss.ambient_fallback", auto=False)
         self.regularizer, self.lam, self.tol = regularizer, float(lam), tol
         self.reweight_every, self.tv_eps = int(reweight_every), float(tv_eps)
-        check_faces(ambient_fallback)
-        self.ambient_setting, self.crossed_cover, self.ambient_fallback = ambient_faces, float(crossed_cover), ambient_fallback
+        self.ambient_setting, self.ambient_fallback = ambient_faces, ambient_fallback
+        self.crossed_cover = float(crossed_cover)
         self.projector_name, self.max_matrix_gib = projector, float(max_matrix_gib)
         self.step_mm, self.chunk, self.dtype = step_mm, int(chunk), getattr(torch, dtype)
         self.labels.update(regularizer=regularizer, lam=float(lam))
