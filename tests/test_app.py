@@ -84,7 +84,7 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("encoder=fourier", "Available options in 'encoder'"),
     ("encoder.name=fourier", "unknown encoder 'fourier'; registered encoders: frequency, hash, none"),
     ("solver=cgls solver.regularizer=tv", "needs a weight solver.lam > 0"),
-    ("train.rays_per_view=0", "rays per view must be at least 1"),
+    ("train.rays_per_batch=0", "rays per batch must be at least 1"),
     ("sampler.samples_per_ray=1", "samples per ray K must be at least 2"),
     ("phantom.T_peak=0.5", "below 1 K"),
     ("loss.ambient_faces=[w]", "ambient faces"),

@@ -78,7 +78,7 @@ def test_no_second_order_graph_when_only_the_discrete_term_trains(monkeypatch):
 
 
 @pytest.mark.parametrize("override, message", [
-    ("train.rays_per_view=0", "rays per view must be at least 1"),
+    ("train.rays_per_batch=0", "rays per batch must be at least 1"),
     ("train.iterations=0", "iterations must be at least 1"),
     ("train.outside_fraction=1.0", "outside_fraction must be within"),
     ("sampler.samples_per_ray=1", "samples per ray K must be at least 2"),
@@ -101,19 +101,30 @@ def test_a_view_with_an_empty_2d_mask_trains_on_all_its_rays():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the empty mask's warning (tests/test_backprojection.py)
         masks = MASKS.build({"name": "2d", "threshold": 1e-3, "radius_px": 2}, scene=scene)
-    tr = solver(tiny_config("train.rays_per_view=16", "train.outside_fraction=0.1"), scene, masks)
-    idx = tr.draw(2)
+    tr = solver(tiny_config("train.outside_fraction=0.1"), scene, masks)
+    idx = tr.draw(2, 16)
     assert len(idx) == 16 and bool(((idx >= sl.start) & (idx < sl.stop)).all())
-    batch, sl0 = tr.draw(0), scene.view_slice(0)  # a view with a mask: 16 - round(1.6) = 14 rays inside it, 2 outside
-    assert int(torch.isin(batch, masks.inside[0]).sum()) == 14 and bool(((batch >= sl0.start) & (batch < sl0.stop)).all())
+    batch, sl1 = tr.draw(1, 16), scene.view_slice(1)  # a view with a mask: 16 - round(1.6) = 14 rays inside it, 2 outside
+    assert int(torch.isin(batch, masks.inside[1]).sum()) == 14 and bool(((batch >= sl1.start) & (batch < sl1.stop)).all())
+    assert len(tr.draw(0, 16)) == 16  # view 0's mask holds every ray: all 16 from inside
     assert np.isfinite(tr.step()["loss"])
+
+
+@pytest.mark.parametrize("views, expected", [("all", [[5, 5, 4, 4, 4, 4]] * 2), (1, [[26, 0, 0, 0, 0, 0], [0, 26, 0, 0, 0, 0]]),
+                                             (4, [[7, 7, 6, 6, 0, 0], [6, 6, 0, 0, 7, 7]])])
+def test_a_batch_splits_its_rays_evenly_over_its_views_and_cycles_them(views, expected):
+    tr = neural_solver(f"train.views_per_batch={views}", "train.rays_per_batch=26")
+    for per_view in expected:
+        views_of = torch.searchsorted(tr.scene.view_start, tr.batch(), right=True) - 1
+        assert torch.bincount(views_of, minlength=tr.scene.n_views).tolist() == per_view
+        tr.step()
 
 
 @pytest.mark.slow
 def test_a_small_reconstruction_cuts_the_error_well_under_half_of_the_ambient_field():
     # a 10 mm blob (peak 1200 K) in a 48 mm box, 6 views with a 2.8 mm pixel footprint, 400 iterations
     tr = neural_solver("encoder=hash", "phantom.width_mm=10.0", "rig.binning=20", "train.iterations=400",
-                      "train.rays_per_view=128")
+                      "train.rays_per_batch=128")
     while tr.iteration < tr.iterations:
         tr.step()
     m = tr.evaluate()

@@ -20,7 +20,8 @@ from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_
 
 @SOLVERS.register("nerif")
 class NeuralSolver(IterativeSolver):
-    """Adam + cosine annealing on random rays of one view per iteration (views cycled).
+    """Adam + cosine annealing on batches of random rays drawn evenly from every view (or, as in the paper, from
+    one view per iteration, views cycled).
 
     Built from ``conf/solver/nerif.yaml``, whose groups it reads:
 
@@ -31,9 +32,9 @@ class NeuralSolver(IterativeSolver):
         sampler: a :data:`SAMPLERS` config. loss: the ambient boundary condition (``ambient_faces``: ``auto`` or
             a list, ``crossed_cover``, ``ambient_fallback``, ``ambient_weight``, ``ambient_points``; see
             :class:`nerif.losses.AmbientBoundary` and :meth:`IterativeSolver.resolve_ambient_faces`).
-        train: ``iterations``, ``eval_every``, ``rays_per_view``, ``outside_fraction`` (share of each batch drawn
-            from the view's rays outside its 2-D mask), and Adam's ``lr``, ``betas``, ``eps`` with the cosine
-            floor ``lr_min``.
+        train: ``iterations``, ``eval_every``, ``rays_per_batch``, ``views_per_batch`` (a number, or ``all``),
+            ``outside_fraction`` (share of each view's rays drawn outside its 2-D mask), and Adam's ``lr``,
+            ``betas``, ``eps`` with the cosine floor ``lr_min``.
         metrics, seed, label: see :class:`IterativeSolver`.
     """
 
@@ -43,9 +44,13 @@ class NeuralSolver(IterativeSolver):
                  train: Mapping, metrics: Mapping, seed: int, label: str):
         super().__init__(iterations=train["iterations"], eval_every=train["eval_every"], metrics=metrics, seed=seed,
                          label=label)
-        self.rays_per_view = int(train["rays_per_view"])
-        if self.rays_per_view < 1:
-            raise ValueError(f"rays per view must be at least 1, got {self.rays_per_view}")
+        self.rays_per_batch = int(train["rays_per_batch"])
+        if self.rays_per_batch < 1:
+            raise ValueError(f"rays per batch must be at least 1, got {self.rays_per_batch}")
+        k = train["views_per_batch"]
+        if not (k == "all" or (isinstance(k, int) and not isinstance(k, bool) and k >= 1)):
+            raise ValueError(f"train.views_per_batch must be a number of views (at least 1) or 'all', got {k!r}")
+        self.views_per_batch = k
         self.outside_fraction = float(train["outside_fraction"])
         if not 0.0 <= self.outside_fraction < 1.0:
             raise ValueError(f"outside_fraction must be within [0, 1), got {self.outside_fraction}")
@@ -101,33 +106,49 @@ class NeuralSolver(IterativeSolver):
         """Ray directions to project the rendered deflections with, when only their perpendicular part is measured."""
         return d if self.scene.perpendicular_only else None
 
-    def _pools(self, scene: Scene, inside, outside_fraction: float) -> list[list[tuple[torch.Tensor, int]]]:
-        """Per view: (ray indices, how many to draw) pairs; ``inside``: per view, the scene indices of the rays
-        inside its 2-D mask (None: every ray)."""
+    def _pools(self, scene: Scene, inside, outside_fraction: float) -> list[tuple[torch.Tensor, Optional[torch.Tensor]]]:
+        """Per view: (rays inside its 2-D mask, rays outside it or None), as scene indices; ``inside``: per view,
+        the scene indices of the rays inside its 2-D mask (None: every ray)."""
         pools = []
         for v in range(scene.n_views):
             sl = scene.view_slice(v)
             every = torch.arange(sl.start, sl.stop, device=scene.dirs.device)
             if inside is None or len(inside[v]) == 0:  # no mask, or an empty one (warned when it was built)
-                pools.append([(every, self.rays_per_view)])
+                pools.append((every, None))
                 continue
-            n_out = int(round(outside_fraction * self.rays_per_view))
             outside = every[~torch.isin(every, inside[v])]
-            pools.append([(inside[v], self.rays_per_view - n_out)] + ([(outside, n_out)] if n_out and len(outside) else []))
+            pools.append((inside[v], outside if len(outside) else None))
         return pools
 
-    def draw(self, view: int) -> torch.Tensor:
-        """Scene indices of a batch of rays of ``view`` (inside its 2-D mask, plus the outside share)."""
-        return torch.cat([pool[torch.randint(len(pool), (n,), generator=self.generator, device=self.device)]
-                          for pool, n in self.pools[view]])
+    def draw(self, view: int, n: int) -> torch.Tensor:
+        """Scene indices of ``n`` random rays of ``view``: inside its 2-D mask, and ``round(outside_fraction n)``
+        of them outside it."""
+        inside, outside = self.pools[view]
+        n_out = int(round(self.outside_fraction * n)) if outside is not None else 0
+        parts = [(inside, n - n_out)] + ([(outside, n_out)] if n_out else [])
+        return torch.cat([pool[torch.randint(len(pool), (m,), generator=self.generator, device=self.device)]
+                          for pool, m in parts])
+
+    def batch_views(self) -> list[int]:
+        """The views of this iteration's batch: the next ``views_per_batch`` views, cycled, so that every view
+        is seen equally often (with ``all``, every view in every batch)."""
+        n = self.scene.n_views
+        k = n if self.views_per_batch == "all" else min(self.views_per_batch, n)
+        return [(self.iteration * k + j) % n for j in range(k)]
+
+    def batch(self) -> torch.Tensor:
+        """Scene indices of this iteration's ``rays_per_batch`` rays, split evenly over :meth:`batch_views`."""
+        views = self.batch_views()
+        share, extra = divmod(self.rays_per_batch, len(views))
+        counts = [share + (j < extra) for j in range(len(views))]
+        return torch.cat([self.draw(v, c) for v, c in zip(views, counts) if c])
 
     # --- optimisation ---
     def step(self) -> dict:
-        """One iteration on the next view; returns the loss terms (floats)."""
+        """One iteration on the next views (:meth:`batch_views`); returns the loss terms (floats)."""
         t0 = time.perf_counter()
-        view = self.iteration % self.scene.n_views
         self.sampler.update(self.field, self.iteration, self.generator)
-        o, d, eps_obs = self.rays(self.draw(view))
+        o, d, eps_obs = self.rays(self.batch())
         samples = self.sampler(self.scene.box, o, d, self.generator)
         trained = {name: True for name, w in self.weights.items() if w > 0}
         eps = render_deflections(self.field, samples, trained, self.step_mm, dirs=self._measured(d))
