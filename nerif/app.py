@@ -12,6 +12,7 @@ from omegaconf import DictConfig
 from nerif.configs import group
 from nerif.data import DATASETS
 from nerif.io.export import write_json, write_npz, write_png, write_vti
+from nerif.io.folders import check_writable
 from nerif.io.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
 from nerif.masks import MASKS
 from nerif.sensing.displacement import view_displacements
@@ -20,10 +21,21 @@ from nerif.solvers import SOLVERS
 log = logging.getLogger(__name__)
 
 
+DEVICES = "auto, cpu, cuda or cuda:N"
+
+
 def resolve_device(name: str) -> torch.device:
+    """``auto`` (cuda when available, else cpu), ``cpu``, ``cuda`` or ``cuda:N``; one sentence otherwise."""
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    dev = torch.device(name)
+    try:
+        dev = torch.device(str(name))
+    except RuntimeError:
+        dev = None
+    if dev is None or dev.type not in ("cpu", "cuda"):
+        raise ValueError(f"device={name} is not one nerif runs on; use {DEVICES}")
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise ValueError(f"device={name}: this machine has {torch.cuda.device_count()} CUDA GPU(s)")
     if dev.type == "cuda" and not torch.cuda.is_available():
         raise ValueError(f"device={name} was asked for but no CUDA GPU is available; use device=cpu or auto")
     return dev
@@ -34,6 +46,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     device = resolve_device(cfg.device)
+    check_writable(out_dir)
     torch.manual_seed(cfg.seed)
     # every check that can fail happens here, before any training; the solver checks its settings before any data
     solver = SOLVERS.build(group(cfg, "solver"))
@@ -72,8 +85,8 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     log.info("%s: %d views, %d rays; %s, device %s", cfg.data.name, scene.n_views, len(scene.dirs),
              ", ".join(f"{k} {v}" for k, v in solver.labels.items()), device)
     try:
-        solver.fit(checkpoint_every=tc.checkpoint_every, checkpoint=checkpoint,
-                    on_eval=on_eval, on_step=on_step, progress=tc.progress)
+        solver.fit(checkpoint_every=tc.checkpoint_every, checkpoint_every_s=tc.checkpoint_every_s,
+                   checkpoint=checkpoint, on_eval=on_eval, on_step=on_step, progress=tc.progress)
     finally:
         writer.close()
 
@@ -81,6 +94,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     metrics.update(setup_time_s=setup_s, device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
     if device.type == "cuda":
         metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
+    metrics["total_time_s"] = time.perf_counter() - t_start
     write_json(metrics, out_dir / "metrics.json")
     print(summary_line(metrics, out_dir), flush=True)
     return metrics
@@ -170,13 +184,22 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
 
 
 def summary_line(m: dict, out_dir: Path) -> str:
+    """One line of the run's headline figures, each named as in ``metrics.json``."""
+    def known(k):
+        return m.get(k) is not None and np.isfinite(m[k])
+
     parts = []
-    if "temperature_rmse_K" in m:
-        parts.append(f"T RMSE {m['temperature_rmse_K']:.1f} K (flame {m['temperature_rmse_flame_K']:.1f} K)")
+    if known("temperature_rmse_K"):
+        flame = f" (flame {m['temperature_rmse_flame_K']:.1f} K)" if known("temperature_rmse_flame_K") else ""
+        parts.append(f"T RMSE {m['temperature_rmse_K']:.1f} K{flame}")
     unit = "sigma" if "deflection_unit" in m else "rad"
     parts.append(f"deflection RMSE {m['deflection_rmse']:.3g} {unit}")
-    if "heldout_psnr_db" in m:
-        px = f", {m['heldout_displacement_rmse_px']:.3g} px" if "heldout_displacement_rmse_px" in m else ""
-        parts.append(f"held out: RMSE {m['heldout_deflection_rmse']:.3g} {unit}{px}, PSNR {m['heldout_psnr_db']:.1f} dB")
-    parts.append(f"{m['iterations']} it in {m['wall_time_s']:.0f} s ({m['ms_per_iteration']:.1f} ms/it)")
+    if known("heldout_deflection_rmse"):
+        held = [f"deflection RMSE {m['heldout_deflection_rmse']:.3g} {unit}, PSNR {m['heldout_psnr_db']:.1f} dB"]
+        if known("heldout_displacement_rmse_px"):
+            held.append(f"displacement RMSE {m['heldout_displacement_rmse_px']:.3g} px, PSNR "
+                        f"{m['heldout_displacement_psnr_db']:.1f} dB")
+        parts.append("held out: " + "; ".join(held))
+    parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training ({m['ms_per_iteration']:.1f} ms/it), "
+                 f"{m['total_time_s']:.0f} s in all")
     return "nerif: " + " | ".join(parts) + f" | {out_dir}"

@@ -1,12 +1,15 @@
 """The command line as a user runs it: outputs of a run, the multirun table, clear errors on bad input."""
 import csv
 import json
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from tests.helpers import TINY
 
@@ -66,6 +69,18 @@ def test_multirun_writes_the_summary_table(tmp_path):
     assert md.count("\n") == 6 and "T RMSE [K]" in md
 
 
+def test_a_failed_job_is_a_row_of_the_summary_and_the_sweep_exits_non_zero(tmp_path):
+    sweep = tmp_path / "sweep"
+    r = nerif("-m", *TINY, "train.iterations=4", "train.outside_fraction=0.05,1.5", f"hydra.sweep.dir={sweep}", cwd=ROOT)
+    assert r.returncode == 1
+    assert "1 of 2 jobs failed" in r.stdout + r.stderr and "Traceback" not in r.stdout + r.stderr
+    rows = {row["config"].split()[-1]: row for row in csv.DictReader((sweep / "summary.csv").open())}
+    good, bad = rows["train.outside_fraction=0.05"], rows["train.outside_fraction=1.5"]
+    assert float(good["temperature_rmse_K"]) > 0 and not good["error"]
+    assert bad["error"] == "outside_fraction must be within [0, 1), got 1.5" and not bad["temperature_rmse_K"]
+    assert "FAILED: outside_fraction must be within [0, 1), got 1.5" in (sweep / "summary.md").read_text()
+
+
 def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     sweep = tmp_path / "sweep"
     r = nerif("-m", *TINY, "train.iterations=6", "solver=nerif,cgls", f"hydra.sweep.dir={sweep}", cwd=ROOT)
@@ -91,6 +106,10 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("data.sensing=realistic data.sensor.noise_variance=-1", "noise variance must be >= 0"),
     ("data.sensing=realistic pattern.name=stripes", "unknown background pattern 'stripes'"),
     ("data.sensing=realistic data.sensor.image_binning=7", "image_binning=7 must divide or be a multiple"),
+    ("rig.binning=0", "rig.binning=0: pixel binning must be a whole number of at least 1"),
+    ("rig.binning=-2", "rig.binning=-2: pixel binning must be a whole number of at least 1"),
+    ("device=gpu", "device=gpu is not one nerif runs on; use auto, cpu, cuda or cuda:N"),
+    ("device=mps", "device=mps is not one nerif runs on"),
 ])
 def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
     r = nerif(*TINY, *override.split(), f"hydra.run.dir={tmp_path}", cwd=ROOT)
@@ -98,6 +117,17 @@ def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
     assert message in r.stderr + r.stdout
     assert "Traceback" not in r.stderr
     assert not (tmp_path / "checkpoint.pt").exists()
+
+
+@pytest.mark.parametrize("mode", ["run", "multirun"])
+def test_an_unwritable_output_folder_is_one_sentence_before_any_work(tmp_path, mode):
+    (tmp_path / "a_file").write_text("")
+    folder = tmp_path / "a_file" / "out"  # under a regular file: not even root can write there
+    key = "hydra.run.dir" if mode == "run" else "hydra.sweep.dir"
+    r = nerif(*(["-m", "seed=0,1"] if mode == "multirun" else []), *TINY, f"{key}={folder}", cwd=ROOT)
+    assert r.returncode == 2
+    assert f"the output folder {folder} cannot be written (Not a directory); choose another with {key}=" in r.stderr
+    assert "Traceback" not in r.stderr + r.stdout
 
 
 @pytest.mark.slow
@@ -123,3 +153,53 @@ def test_the_default_scene_reaches_the_target_error(tmp_path):
     m = json.loads((tmp_path / "metrics.json").read_text())
     assert m["encoder"] == "hash" and m["grad"] == "discrete" and m["iterations"] == 1200
     assert m["temperature_rmse_K"] < 25.0, m["temperature_rmse_K"]
+
+
+@pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_a_signal_saves_a_checkpoint_says_so_in_one_line_and_the_run_resumes(tmp_path, signum, code):
+    """SIGTERM (Slurm, timeout, a container stop) as Ctrl-C: a checkpoint, one warning, no traceback."""
+    args = [*TINY, "train.iterations=100000", "train.eval_every=100000", "train.checkpoint_every=100000",
+            f"hydra.run.dir={tmp_path}"]
+    p = subprocess.Popen([sys.executable, "-m", "nerif", *args], cwd=ROOT, stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True)
+    deadline = time.monotonic() + 300
+    while not (tmp_path / "tensorboard").is_dir() and time.monotonic() < deadline:  # training has started
+        time.sleep(0.2)
+    time.sleep(2.0)
+    p.send_signal(signum)
+    out = p.communicate(timeout=120)[0]
+    assert p.returncode == code, out
+    assert "Traceback" not in out and out.count("checkpoint saved to") == 1, out
+    done = torch.load(tmp_path / "checkpoint.pt", weights_only=False)["iteration"]
+    assert done > 0
+    r = nerif(*TINY, f"train.resume={tmp_path / 'checkpoint.pt'}", f"train.iterations={done + 5}",
+              f"hydra.run.dir={tmp_path / 'resumed'}", cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "resumed" / "metrics.json").read_text())["iterations"] == done + 5
+
+
+
+def test_a_flame_free_scene_writes_strict_json_and_an_honest_summary_line(tmp_path):
+    r = nerif(*TINY, "phantom.T_peak=296.15", "mask=none", "train.iterations=5", f"hydra.run.dir={tmp_path}", cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+
+    def refuse(token):
+        raise AssertionError(f"{token} in metrics.json")
+
+    m = json.loads((tmp_path / "metrics.json").read_text(), parse_constant=refuse)  # NaN is not JSON
+    assert m["temperature_rmse_flame_K"] is None  # no flame: no flame error
+    line = [s for s in r.stdout.splitlines() if s.startswith("nerif:")][-1].rsplit(" | ", 1)[0]  # without the folder
+    assert "nan" not in line.lower() and "flame" not in line
+    assert f"{m['wall_time_s']:.0f} s training" in line and f"{m['total_time_s']:.0f} s in all" in line
+    assert m["total_time_s"] > m["wall_time_s"]
+
+
+def test_the_summary_line_names_each_held_out_figure_as_metrics_json_does():
+    from nerif.app import summary_line
+
+    m = {"deflection_rmse": 1e-5, "heldout_deflection_rmse": 2e-5, "heldout_psnr_db": 19.5,
+         "heldout_displacement_rmse_px": 0.3, "heldout_displacement_psnr_db": 17.8, "iterations": 10,
+         "wall_time_s": 1.0, "total_time_s": 54.0, "ms_per_iteration": 100.0}
+    line = summary_line(m, Path("out"))
+    assert "deflection RMSE 2e-05 rad, PSNR 19.5 dB; displacement RMSE 0.3 px, PSNR 17.8 dB" in line
+    assert "10 it: 1 s training (100.0 ms/it), 54 s in all" in line

@@ -1,9 +1,11 @@
 """The loop every solver shares: evaluation cadence, early stop, checkpoints, Ctrl-C, resume, fixed rays."""
+import time
+
 import pytest
 import torch
 
 from nerif.data import DATASETS
-from nerif.solvers.base import SOLVERS, IterativeSolver, fixed_rays
+from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, fixed_rays
 
 METRICS = {"flame_threshold_K": 1.0, "eval_rays_per_view": 4}
 
@@ -13,13 +15,17 @@ class Halving(IterativeSolver):
 
     name = "halving"
 
-    def __init__(self, iterations=10, eval_every=3, tol=0.0, interrupt_at=None):
+    def __init__(self, iterations=10, eval_every=3, tol=0.0, interrupt_at=None, diverge_at=None, sleep_s=0.0):
         super().__init__(iterations=iterations, eval_every=eval_every, metrics=METRICS, seed=0, label="halving")
-        self.x, self.tol, self.interrupt_at = 1.0, tol, interrupt_at
+        self.x, self.tol, self.interrupt_at, self.diverge_at, self.sleep_s = 1.0, tol, interrupt_at, diverge_at, sleep_s
+        self.saved_at = []
 
     def step(self):
         if self.iteration == self.interrupt_at:
             raise KeyboardInterrupt
+        if self.iteration == self.diverge_at:
+            raise DivergenceError(f"the loss became nan at iteration {self.iteration}")
+        time.sleep(self.sleep_s)
         self.x /= 2
         self._timed(0.001)
         return {"loss": self.x, "converged": self.x < self.tol}
@@ -30,6 +36,10 @@ class Halving(IterativeSolver):
 
     def state_dict(self):
         return {**super().state_dict(), "x": self.x}
+
+    def save(self, path):
+        self.saved_at.append(self.iteration)
+        super().save(path)
 
     def load_state_dict(self, st):
         super().load_state_dict(st)
@@ -59,6 +69,19 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes_exactly(tmp_path):
     assert resumed.iteration == 5 and resumed.x == 2.0**-5
     resumed.fit(checkpoint_every=100, progress=False)
     assert resumed.x == 2.0**-10 and [h["iteration"] for h in resumed.history] == [3, 6, 9, 10]
+
+
+def test_checkpoints_come_at_most_the_time_interval_apart(tmp_path):
+    s = Halving(iterations=6, sleep_s=0.04)
+    s.fit(checkpoint_every=1000, checkpoint_every_s=0.07, checkpoint=tmp_path / "ck.pt", progress=False)
+    assert s.saved_at == [2, 4, 6]  # 0.08 s of steps between saves; the iteration cadence alone: [6]
+
+
+def test_a_diverged_run_says_which_checkpoint_is_kept(tmp_path):
+    with pytest.raises(DivergenceError, match="no checkpoint had been saved yet"):
+        Halving(diverge_at=2).fit(checkpoint_every=5, checkpoint=tmp_path / "ck.pt", progress=False)
+    with pytest.raises(DivergenceError, match=r"at iteration 7; the checkpoint of iteration 5 is kept"):
+        Halving(diverge_at=7).fit(checkpoint_every=5, checkpoint=tmp_path / "ck.pt", progress=False)
 
 
 def test_a_missing_checkpoint_and_bad_settings_are_one_sentence(tmp_path):

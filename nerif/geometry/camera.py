@@ -144,6 +144,9 @@ def arc_rig(
         n_cameras = len(angles_deg)
     if n_cameras < 1:
         raise ValueError(f"a rig needs at least one camera, got {n_cameras}")
+    if isinstance(binning, bool) or not isinstance(binning, int) or binning < 1:
+        raise ValueError(f"rig.binning={binning}: pixel binning must be a whole number of at least 1 (1 = the full "
+                         "sensor)")
     background_mm = distance_mm + background_behind_mm
     if not focal_mm < background_mm:
         raise ValueError(f"a {focal_mm} mm lens cannot focus on a background {background_mm} mm away")

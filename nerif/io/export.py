@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import base64
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -38,10 +39,22 @@ def atomic_save_torch(obj, path: Path) -> Path:
     return atomic_write(path, lambda tmp: torch.save(obj, tmp))
 
 
+def strict_json(obj):
+    """``obj`` with every NaN or infinite float replaced by None (``null``: strict JSON has no NaN)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: strict_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [strict_json(v) for v in obj]
+    return obj
+
+
 def write_json(obj: dict, path: Path) -> Path:
+    """``obj`` as strict JSON (NaN and infinities as ``null``), atomically."""
     def write(tmp):
         with open(tmp, "w") as f:
-            json.dump(obj, f, indent=2, sort_keys=True)
+            json.dump(strict_json(obj), f, indent=2, sort_keys=True, allow_nan=False)
             f.write("\n")
 
     return atomic_write(path, write)

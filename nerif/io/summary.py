@@ -4,13 +4,18 @@ from __future__ import annotations
 import csv
 import io
 import json
+import logging
+import sys
 from pathlib import Path
 from typing import Any
 
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
-from nerif.io.export import atomic_write
+from nerif.io.export import atomic_write, write_json
+
+log = logging.getLogger("nerif")
+FAILED = "failed.json"  # written in a job's folder when the job failed: {"error": its one-sentence message}
 
 COLUMNS = [("temperature_rmse_K", "T RMSE [K]", "{:.2f}"), ("temperature_rmse_flame_K", "T RMSE flame [K]", "{:.2f}"),
            ("deflection_rmse", "deflection RMSE [rad, or sigma]", "{:.3e}"), ("wall_time_s", "wall time [s]", "{:.1f}"),
@@ -24,13 +29,22 @@ COLUMNS = [("temperature_rmse_K", "T RMSE [K]", "{:.2f}"), ("temperature_rmse_fl
 
 
 def collect(sweep_dir: Path) -> list[dict]:
-    """One row per job folder with a metrics.json: its overrides as 'config' plus the metric columns."""
+    """One row per job folder: its overrides as 'config', plus the metric columns (a finished job) or its
+    'error' (a failed one: a ``failed.json`` and no metrics)."""
     rows = []
-    for mfile in sorted(Path(sweep_dir).glob("*/metrics.json"), key=lambda p: p.parent.name):
-        ov_file = mfile.parent / ".hydra" / "overrides.yaml"
-        overrides = OmegaConf.to_container(OmegaConf.load(ov_file)) if ov_file.is_file() else [mfile.parent.name]
-        m = json.loads(mfile.read_text())
-        rows.append({"config": " ".join(overrides) or "(defaults)", **{k: m.get(k) for k, _, _ in COLUMNS}})
+    for job in sorted((p for p in Path(sweep_dir).iterdir() if p.is_dir()), key=lambda p: p.name):
+        mfile, ffile = job / "metrics.json", job / FAILED
+        if not (mfile.is_file() or ffile.is_file()):
+            continue
+        ov_file = job / ".hydra" / "overrides.yaml"
+        overrides = OmegaConf.to_container(OmegaConf.load(ov_file)) if ov_file.is_file() else [job.name]
+        row = {"config": " ".join(overrides) or "(defaults)"}
+        if mfile.is_file():
+            m = json.loads(mfile.read_text())
+            row.update({k: m.get(k) for k, _, _ in COLUMNS})
+        else:
+            row["error"] = json.loads(ffile.read_text()).get("error", "failed")
+        rows.append(row)
     return rows
 
 
@@ -38,6 +52,8 @@ def write_tables(rows: list[dict], folder: Path, stem: str = "summary", header: 
     """``<stem>.md`` and ``<stem>.csv`` in ``folder``: one row per dict (its 'config' and metric columns).
     Returns the markdown."""
     present = [c for c in COLUMNS if any(r.get(c[0]) is not None for r in rows)]
+    if any("error" in r for r in rows):
+        present.append(("error", "error", "FAILED: {}"))
     md = ([header, ""] if header else []) + ["| config | " + " | ".join(h for _, h, _ in present) + " |",
                                              "|---" * (len(present) + 1) + "|"]
     for r in rows:
@@ -54,10 +70,24 @@ def write_tables(rows: list[dict], folder: Path, stem: str = "summary", header: 
 
 
 class MultirunSummary(Callback):
-    """Hydra callback: after a multirun, tabulate the jobs' metrics in ``summary.md`` and ``summary.csv``."""
+    """Hydra callback: after a multirun, tabulate the jobs' metrics in ``summary.md`` and ``summary.csv``, failed
+    jobs with their error; the sweep then exits with status 1 if any job failed."""
+
+    def on_job_end(self, config: DictConfig, job_return: Any, **kwargs: Any) -> None:
+        from hydra.core.utils import JobStatus
+
+        folder = Path(config.hydra.runtime.output_dir)
+        if job_return.status == JobStatus.FAILED and not (folder / FAILED).is_file():  # an unexpected exception
+            write_json({"error": f"{type(job_return._return_value).__name__}: {job_return._return_value}"},
+                       folder / FAILED)
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         sweep_dir = Path(config.hydra.sweep.dir)
-        rows = collect(sweep_dir)
+        rows = collect(sweep_dir) if sweep_dir.is_dir() else []
         if rows:
             print(write_tables(rows, sweep_dir), flush=True)
+        failed = [r["config"] for r in rows if "error" in r]
+        if failed:
+            log.error("%d of %d jobs failed (%s); see %s", len(failed), len(rows), "; ".join(failed),
+                      sweep_dir / "summary.md")
+            sys.exit(1)

@@ -12,6 +12,10 @@ its solvers in :data:`SOLVERS`.
 from __future__ import annotations
 
 import logging
+import signal
+import threading
+import time
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Mapping, Optional
 
@@ -32,6 +36,31 @@ _COUNTERS = ("iteration", "history", "train_seconds", "step_times")
 
 class DivergenceError(RuntimeError):
     """The loss became NaN or infinite."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C or SIGTERM (Slurm, ``timeout``, a container stop) during a run: the work done so far is saved."""
+
+    def __init__(self, signal_name: str = "SIGINT"):
+        super().__init__(signal_name)
+        self.signal_name = signal_name
+
+
+@contextmanager
+def sigterm_interrupts():
+    """Within the block, SIGTERM raises :class:`Interrupted` as Ctrl-C does (main thread only; restored after)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise Interrupted("SIGTERM")
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def check_faces(setting, key: str = "loss.ambient_faces", auto: bool = True) -> None:
@@ -184,37 +213,52 @@ class IterativeSolver:
     # --- loop ---
     def fit(self, *, checkpoint_every: int, checkpoint: Optional[Path] = None,
             on_eval: Optional[Callable[[dict], None]] = None, on_step: Optional[Callable[[int, dict], None]] = None,
-            progress: bool = True) -> dict:
-        """Run to ``iterations``; evaluates every :attr:`eval_every` and at the end, checkpoints every
-        ``checkpoint_every`` (atomically) and on Ctrl-C. An exception from ``step`` leaves the last good
+            progress: bool = True, checkpoint_every_s: Optional[float] = None) -> dict:
+        """Run to ``iterations``; evaluates every :attr:`eval_every` and at the end, checkpoints (atomically)
+        every ``checkpoint_every`` iterations, at most ``checkpoint_every_s`` seconds apart, at the end and on
+        Ctrl-C or SIGTERM (then raises :class:`Interrupted`). An exception from ``step`` leaves the last good
         checkpoint in place."""
         from tqdm import tqdm
 
         bar = tqdm(total=self.iterations, initial=self.iteration, disable=not progress, mininterval=2.0,
                    desc=self.name, unit="it", dynamic_ncols=True)
         last = self.history[-1] if self.history else {}
+        saved_at = time.monotonic()
         try:
-            while self.iteration < self.iterations:
-                terms = self.step()
-                bar.update(1)
-                if on_step is not None:
-                    on_step(self.iteration, terms)
-                done = self.iteration == self.iterations or terms.get("converged", False)
-                if self.iteration % self.eval_every == 0 or done:
-                    last = self.evaluate()
-                    if on_eval is not None:
-                        on_eval(last)
-                    if "temperature_rmse_K" in last:
-                        bar.set_postfix(loss=f"{terms['loss']:.3g}", T_rmse=f"{last['temperature_rmse_K']:.1f}K")
-                if checkpoint is not None and (self.iteration % checkpoint_every == 0 or done):
-                    self.save(checkpoint)
-                if done:
-                    break
-        except KeyboardInterrupt:
-            if checkpoint is not None:
+            with sigterm_interrupts():
+                while self.iteration < self.iterations:
+                    terms = self.step()
+                    bar.update(1)
+                    if on_step is not None:
+                        on_step(self.iteration, terms)
+                    done = self.iteration == self.iterations or terms.get("converged", False)
+                    if self.iteration % self.eval_every == 0 or done:
+                        last = self.evaluate()
+                        if on_eval is not None:
+                            on_eval(last)
+                        if "temperature_rmse_K" in last:
+                            bar.set_postfix(loss=f"{terms['loss']:.3g}", T_rmse=f"{last['temperature_rmse_K']:.1f}K")
+                    due = self.iteration % checkpoint_every == 0 or done or (
+                        checkpoint_every_s is not None and time.monotonic() - saved_at >= checkpoint_every_s)
+                    if checkpoint is not None and due:
+                        self.save(checkpoint)
+                        saved_at = time.monotonic()
+                    if done:
+                        break
+        except KeyboardInterrupt as e:
+            what = e.signal_name if isinstance(e, Interrupted) else "SIGINT"
+            if checkpoint is not None and self.iteration > 0:
                 self.save(checkpoint)
-                log.warning("interrupted at iteration %d; checkpoint saved to %s", self.iteration, checkpoint)
-            raise
+                log.warning("%s at iteration %d: checkpoint saved to %s (continue with train.resume=%s)", what,
+                            self.iteration, checkpoint, checkpoint)
+            else:
+                log.warning("%s at iteration %d: nothing to save", what, self.iteration)
+            raise Interrupted(what) from None
+        except DivergenceError as e:
+            kept = (f"the checkpoint of iteration {torch.load(checkpoint, weights_only=False)['iteration']} is kept "
+                    f"({checkpoint})" if checkpoint is not None and Path(checkpoint).is_file()
+                    else "no checkpoint had been saved yet")
+            raise DivergenceError(f"{e.args[0]}; {kept}") from None
         finally:
             bar.close()
         return last

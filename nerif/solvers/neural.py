@@ -159,7 +159,7 @@ class NeuralSolver(IterativeSolver):
             loss = loss + boundary
         if not torch.isfinite(loss):
             raise DivergenceError(f"the loss became {loss.item()} at iteration {self.iteration}: the run diverged "
-                                  "(try a lower train.lr); the last good checkpoint is kept")
+                                  "(try a lower train.lr)")
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
