@@ -174,6 +174,7 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     final["history"] = solver.history
     final.update(solver.labels)
     final.update(solver.report)
+    final.update(solver.saturation(sigma))
     if scene.sensing is not None:
         final["displacement_rmse_px"] = float(scene.sensing["displacement_rmse_px"])
         final["circle_of_confusion_px"] = float(scene.sensing["circle_of_confusion_px"])
@@ -200,6 +201,8 @@ def summary_line(m: dict, out_dir: Path) -> str:
             held.append(f"displacement RMSE {m['heldout_displacement_rmse_px']:.3g} px, PSNR "
                         f"{m['heldout_displacement_psnr_db']:.1f} dB")
         parts.append("held out: " + "; ".join(held))
+    if m.get("warning"):
+        parts.append(f"WARNING: {m['warning']}")
     parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training ({m['ms_per_iteration']:.1f} ms/it), "
                  f"{m['total_time_s']:.0f} s in all")
     return "nerif: " + " | ".join(parts) + f" | {out_dir}"

@@ -110,6 +110,8 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("rig.binning=-2", "rig.binning=-2: pixel binning must be a whole number of at least 1"),
     ("device=gpu", "device=gpu is not one nerif runs on; use auto, cpu, cuda or cuda:N"),
     ("device=mps", "device=mps is not one nerif runs on"),
+    ("data.T_max=600", "beyond what the field can represent with data.T_max=600 K (up to 632 K"),
+    ("phantom.T_peak=1000000", "beyond what the field can represent with data.T_max=2000 K (up to 2808 K"),
 ])
 def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
     r = nerif(*TINY, *override.split(), f"hydra.run.dir={tmp_path}", cwd=ROOT)

@@ -146,3 +146,15 @@ def test_only_the_measured_part_is_compared_when_the_scene_says_so():
     t.scene = replace(t.scene, perpendicular_only=True)
     measured = t.predicted_deflections(idx, ("discrete",))["discrete"]
     torch.testing.assert_close(measured, full - (full * d).sum(-1, keepdim=True) * d)
+
+
+def test_a_flame_at_the_prior_bound_is_reported_with_the_setting_to_raise():
+    tr = neural_solver()
+    sigma = np.zeros((10, 10, 10))
+    sigma[:5] = -0.5
+    assert tr.saturation(sigma) == {"flame_at_prior_bound": 0.0}
+    sigma[:2] = -1.05  # 40 % of the flame pinned at the bound (data.T_max=2000 holds at most 2808 K)
+    out = tr.saturation(sigma)
+    assert out["flame_at_prior_bound"] == pytest.approx(0.4)
+    assert out["warning"].startswith("40.0 % of the flame sits at the hottest 2808 K the field can hold "
+                                     "(data.T_max=2000 K)") and "raise data.T_max" in out["warning"]

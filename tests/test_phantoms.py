@@ -18,6 +18,14 @@ def test_phantom5_by_hand():
     assert ph.T[0, 25, 0] == pytest.approx(296.15, abs=1e-6)
 
 
+def test_phantom5_honours_its_ambient_temperature():
+    """``phantom.T0=300`` moves the ambient and keeps the flame's rises (before, T0 was ignored and the whole box,
+    at 296.15 K, counted as flame)."""
+    a, b = phantom5(shape=(18, 25, 18), voxel_mm=4.0), phantom5(shape=(18, 25, 18), voxel_mm=4.0, T0=300.0)
+    assert b.T0 == 300.0 and b.T[0, 12, 0] == pytest.approx(300.0, abs=1e-6)
+    np.testing.assert_allclose(b.T - 300.0, a.T - 296.15, atol=1e-9)
+
+
 def test_gaussian_blob_peak():
     ph = gaussian_blob(shape=(21, 21, 21), voxel_mm=1.0, T_peak=1500.0)
     assert ph.T.max() == pytest.approx(1500.0, rel=1e-9)

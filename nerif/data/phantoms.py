@@ -42,12 +42,13 @@ class Phantom:
         return delta_from_n(n_from_temperature(self.T, self.T0, self.n0), self.n0)
 
 
-def phantom5_temperature(x, y, z):
-    """The paper's analytic Phantom 5 [K] at coordinates [mm] (box x, z in [-36, 36], y in [-50, 50])."""
+def phantom5_temperature(x, y, z, T0: float = 296.15):
+    """The paper's analytic Phantom 5 [K] at coordinates [mm] (box x, z in [-36, 36], y in [-50, 50]): rises of
+    1196.85 K and 696.85 K over the ambient ``T0`` (the paper's: 296.15 K)."""
     def g(x, y, z):
         return np.exp(-(((3 * z**2 + 3 * x**2) / 20**2 + 3 * y**2 / 80**2 - 0.9) ** 2))
 
-    return (296.15 + 1196.85 * g(x, y - 50, z)
+    return (T0 + 1196.85 * g(x, y - 50, z)
             + 696.85 * (g(x, y - 50, z - 25) + g(x, y - 50, z + 25) + g(x, y + 50, z - 25) + g(x, y + 50, z + 25)))
 
 
@@ -55,10 +56,10 @@ def phantom5_temperature(x, y, z):
 def phantom5(shape: Sequence[int] = (36, 50, 36), voxel_mm: float = 2.0, T0: float = 296.15,
              n0: float = 1.00027) -> Phantom:
     """Phantom 5 of the paper sampled at voxel centres (default scene: 2 mm voxels; paper grid: 144 x 200 x 144
-    voxels of 0.5 mm)."""
+    voxels of 0.5 mm), its temperature rises over the ambient ``T0``."""
     box = ProbeBox(tuple(shape), voxel_mm)
     c = box.centres()
-    return Phantom(phantom5_temperature(c[..., 0], c[..., 1], c[..., 2]), box, T0, n0, "phantom5")
+    return Phantom(phantom5_temperature(c[..., 0], c[..., 1], c[..., 2], T0), box, T0, n0, "phantom5")
 
 
 @PHANTOMS.register("gaussian_blob")

@@ -13,7 +13,7 @@ from typing import Optional
 import numpy as np
 import torch
 
-from nerif.cache import cached_arrays
+from nerif.cache import cached_arrays, content_digest
 from nerif.data.phantoms import PHANTOMS
 from nerif.geometry import RIGS, Camera, ProbeBox, rays_in_box, view_index
 from nerif.physics import Ambient
@@ -235,7 +235,7 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
                                     rig_binning=cameras[0].binning, cache_dir=cache_dir)
         return {"eps": eps.cpu().numpy(), **{f"sensing/{k}": v for k, v in (record or {}).items()}}
 
-    payload = {"v": _SCENE_CACHE_VERSION, "phantom": phantom, "rig": rig, "step": render_step_mm,
+    payload = {"v": _SCENE_CACHE_VERSION, "truth": content_digest(ph.T), "phantom": phantom, "rig": rig, "step": render_step_mm,
                "supersample": render_supersample, "sensing": sensing, "sensor": sensor}
     arrays = cached_arrays(cache_dir, "synthetic", payload, observe)
     eps = torch.as_tensor(arrays["eps"], device=device)

@@ -162,6 +162,11 @@ class IterativeSolver:
                 "temperature_rmse_flame_K": rmse(T, Tt, flame_region(Tt, amb.T0, self.flame_threshold_K)),
                 "sigma_rmse": rmse(sigma, amb.sigma_from_temperature(Tt))}
 
+    def saturation(self, sigma: np.ndarray) -> dict:
+        """What a reconstruction ``sigma`` says about the solver's bounds, for ``metrics.json``: a bounded
+        solver reports the share of the flame at its bound, and a ``warning`` when that is sizeable. None here."""
+        return {}
+
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
         """Deflections [rad] (R, 3) of rays (R, 3) through the current field; only their part perpendicular to
         the rays when the scene's observations are perpendicular-only."""

@@ -2,6 +2,7 @@
 and its steps."""
 from __future__ import annotations
 
+import logging
 import time
 from typing import Mapping, Optional
 
@@ -16,6 +17,8 @@ from nerif.metrics import deflection_rmse
 from nerif.renderers import SAMPLERS, render_deflections
 from nerif.renderers.samplers import UniformSampler
 from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_faces, fixed_rays
+
+log = logging.getLogger(__name__)
 
 
 @SOLVERS.register("nerif")
@@ -71,6 +74,7 @@ class NeuralSolver(IterativeSolver):
         draws from (``masks.inside``)."""
         super().setup(scene, masks)
         prior = prior_interval(self.prior, scene.sigma_prior)
+        self._check_truth_within(prior)
         self.field = NeuralField(self.encoder, scene.box, hidden=self.hidden, prior=prior, gate=masks.gate)
         self.field.to(self.device)
         lc = self.loss_cfg
@@ -95,6 +99,35 @@ class NeuralSolver(IterativeSolver):
         self._eval_index = fixed_rays(scene, self.eval_rays_per_view, self.seed + 1)
         self._eval_sampler = UniformSampler(self.sampler.samples_per_ray, jitter=False)
         return self
+
+    def _check_truth_within(self, prior: tuple[float, float]) -> None:
+        """Refuse a known truth that the field cannot represent (hotter than its prior's bound allows)."""
+        amb = self.scene.ambient
+        if self.scene.truth_T is None or not amb.temperature_known:
+            return
+        sigma = amb.sigma_from_temperature(self.scene.truth_T)
+        if sigma.min() < prior[0] - 1e-6 or sigma.max() > prior[1] + 1e-6:
+            hottest = float(self.scene.truth_T.max())
+            bound = float(amb.temperature_from_sigma(np.float64(prior[0])))
+            raise ValueError(f"the true field reaches {hottest:.0f} K, beyond what the field can represent with "
+                             f"data.T_max={amb.T_max:g} K (up to {bound:.0f} K at the prior's bound sigma = "
+                             f"{prior[0]:g}): set data.T_max={np.ceil(hottest / 50) * 50:.0f} or higher")
+
+    def saturation(self, sigma: np.ndarray) -> dict:
+        """Share of the flame (voxels with sigma below -0.05) within 1 % of the prior's lower bound, and a
+        warning when it is over 1 %: the flame may be hotter than ``data.T_max`` lets the field be."""
+        a, b = prior_interval(self.prior, self.scene.sigma_prior)
+        flame = sigma < -0.05
+        share = float((sigma[flame] <= a + 0.01 * (b - a)).mean()) if flame.any() else 0.0
+        out = {"flame_at_prior_bound": share}
+        if share > 0.01:
+            amb = self.scene.ambient
+            what = (f"the hottest {amb.temperature_from_sigma(np.float64(a)):.0f} K the field can hold "
+                    f"(data.T_max={amb.T_max:g} K)" if amb.temperature_known else f"the prior's bound sigma = {a:g}")
+            out["warning"] = (f"{100 * share:.1f} % of the flame sits at {what}: it may be hotter; raise "
+                              f"{'data.T_max' if amb.temperature_known else 'field.prior'}")
+            log.warning("%s", out["warning"])
+        return out
 
     # --- batches ---
     def rays(self, index: torch.Tensor):
