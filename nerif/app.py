@@ -9,7 +9,7 @@ import numpy as np
 import torch
 from omegaconf import DictConfig
 
-from nerif.configs import group
+from nerif.configs import check_complete, group
 from nerif.data import DATASETS
 from nerif.io.export import write_json, write_npz, write_png, write_vti
 from nerif.io.folders import check_writable
@@ -45,6 +45,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     """Reconstruct the configured scene into ``out_dir``; returns the final metrics."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
+    check_complete(cfg)
     device = resolve_device(cfg.device)
     check_writable(out_dir)
     torch.manual_seed(cfg.seed)

@@ -35,3 +35,27 @@ def compose(overrides: Sequence[str] = (), config_name: str = "config") -> DictC
 def group(cfg: DictConfig, key: str) -> dict:
     """One config group, resolved, as plain containers: what a registry builds the component from."""
     return OmegaConf.to_container(cfg[key], resolve=True)
+
+
+def missing_keys(cfg: DictConfig, prefix: str = "") -> list[str]:
+    """Dotted keys of the values left unset (``???``) in ``cfg``, Hydra's own settings left out."""
+    out = []
+    for key in cfg.keys():
+        if not prefix and key == "hydra":
+            continue
+        path = f"{prefix}{key}"
+        if OmegaConf.is_missing(cfg, key):
+            out.append(path)
+        elif OmegaConf.is_interpolation(cfg, key):
+            continue  # a group wired into another one: reported under its own name
+        elif isinstance(cfg[key], DictConfig):
+            out += missing_keys(cfg[key], f"{path}.")
+    return out
+
+
+def check_complete(cfg: DictConfig) -> None:
+    """One sentence naming every required value left unset, e.g. ``phantom.path``."""
+    missing = missing_keys(cfg)
+    if missing:
+        raise ValueError(f"{', '.join(missing)} must be set: give {'it' if len(missing) == 1 else 'them'} on the "
+                         f"command line, e.g. {missing[0]}=...")

@@ -13,6 +13,7 @@ other keys are its keyword arguments) plus the run-time objects it needs::
 from __future__ import annotations
 
 import importlib
+import inspect
 import pkgutil
 from typing import Any, Callable, Mapping, Optional
 
@@ -37,12 +38,16 @@ class Registry:
     def __init__(self, family: str, package: Optional[str] = None):
         self.family, self.package = family, package
         self._entries: dict[str, Callable[..., Any]] = {}
+        self._hints: dict[str, dict[str, str]] = {}
 
-    def register(self, name: str):
+    def register(self, name: str, hints: Optional[Mapping[str, str]] = None):
+        """Decorator registering a component as ``name``; ``hints``: settings users may look for here, mapped to
+        where they really are (``{"binning": "rig.binning"}``), for the message that refuses them."""
         def decorator(obj):
             if name in self._entries:
                 raise ValueError(f"{self.family} '{name}' is registered twice")
             self._entries[name] = obj
+            self._hints[name] = dict(hints or {})
             return obj
 
         return decorator
@@ -75,7 +80,25 @@ class Registry:
         name = params.pop("name", None)
         if name is None:
             raise UnknownComponent(f"the {self.family} config has no 'name'; choose one of: {', '.join(self.names())}")
-        return self.get(name)(**params, **extra)
+        entry = self.get(name)
+        self._check_settings(name, entry, params)
+        return entry(**params, **extra)
+
+    def _check_settings(self, name: str, entry: Callable[..., Any], params: Mapping[str, Any]) -> None:
+        """One sentence for a setting the entry does not take (a stray ``+key=value`` or a misspelling)."""
+        try:
+            sig = inspect.signature(entry)
+        except (TypeError, ValueError):
+            return
+        if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
+            return
+        stray = [k for k in params if k not in sig.parameters]
+        if stray:
+            hints = self._hints.get(name, {})
+            where = "".join(f" (for {k}, use {hints[k]})" for k in stray if k in hints)
+            known = [k for k, p in sig.parameters.items() if p.kind is not p.VAR_POSITIONAL]
+            raise ValueError(f"{', '.join(stray)}: not a setting of the {self.family} '{name}'{where}; its settings: "
+                             f"{', '.join(known)}")
 
     def __contains__(self, name: str) -> bool:
         if name not in self._entries:

@@ -99,6 +99,8 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("encoder=fourier", "Available options in 'encoder'"),
     ("encoder.name=fourier", "unknown encoder 'fourier'; registered encoders: frequency, hash, none"),
     ("solver=cgls solver.regularizer=tv", "needs a weight solver.lam > 0"),
+    ("solver=cgls solver.lam=-1", "solver.lam=-1: a regularisation weight is at least 0"),
+    ("+data.binning=4", "binning: not a setting of the dataset 'synthetic' (for binning, use rig.binning)"),
     ("train.rays_per_batch=0", "rays per batch must be at least 1"),
     ("sampler.samples_per_ray=1", "samples per ray K must be at least 2"),
     ("phantom.T_peak=0.5", "below 1 K"),
@@ -119,6 +121,13 @@ def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
     assert message in r.stderr + r.stdout
     assert "Traceback" not in r.stderr
     assert not (tmp_path / "checkpoint.pt").exists()
+
+
+def test_a_required_value_left_unset_is_named_by_its_key(tmp_path):
+    r = nerif("device=cpu", "phantom=file", f"hydra.run.dir={tmp_path}", cwd=ROOT)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "???" not in r.stdout + r.stderr
+    assert ("phantom.path, phantom.voxel_mm must be set: give them on the command line, e.g. phantom.path=..."
+            in r.stdout + r.stderr)
 
 
 @pytest.mark.parametrize("mode", ["run", "multirun"])

@@ -202,7 +202,7 @@ def keep_rays(dirs, eps, pixel, view_start, keep: torch.Tensor):
     return dirs[keep], eps[keep], pixel[keep], starts
 
 
-@DATASETS.register("synthetic")
+@DATASETS.register("synthetic", hints={"binning": "rig.binning"})
 def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", sensor: Optional[dict] = None,
               render_supersample: int = 4, render_step_mm: Optional[float] = None, cache_dir: Optional[str] = None,
               device: str = "cpu") -> Scene:

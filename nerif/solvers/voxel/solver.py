@@ -68,6 +68,8 @@ class CGLSSolver(IterativeSolver):
                  projector: str, max_matrix_gib: float,
                  step_mm: Optional[float], chunk: int, dtype: str, metrics: Mapping, seed: int, label: str):
         super().__init__(iterations=iterations, eval_every=eval_every, metrics=metrics, seed=seed, label=label)
+        if not lam >= 0:
+            raise ValueError(f"solver.lam={lam}: a regularisation weight is at least 0")
         if REGULARIZERS.build({"name": regularizer}) is not None and not lam > 0:
             raise ValueError(f"regularizer '{regularizer}' needs a weight solver.lam > 0, got {lam}")
         if projector != "auto":
