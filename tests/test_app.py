@@ -214,3 +214,11 @@ def test_the_summary_line_names_each_held_out_figure_as_metrics_json_does():
     line = summary_line(m, Path("out"))
     assert "deflection RMSE 2e-05 rad, PSNR 19.5 dB; displacement RMSE 0.3 px, PSNR 17.8 dB" in line
     assert "10 it: 1 s training (100.0 ms/it), 54 s in all" in line
+
+
+def test_help_says_what_nerif_does_and_lists_the_groups():
+    r = nerif("--help", cwd=ROOT)
+    assert r.returncode == 0 and "powered by Hydra" not in r.stdout
+    assert r.stdout.startswith("nerif: 3-D refractive-index and temperature fields")
+    assert "mask: 2d, 3d, none" in r.stdout and "solver: cgls, nerif" in r.stdout
+    assert r.stdout.count("python -m nerif") >= 3

@@ -51,6 +51,12 @@ def test_camera_from_nerf_pose():
     assert np.allclose(camera_from_nerf_pose(refl, 100.0, 64, 48, 32.0, 24.0, **kw).rotation, cam.rotation)
     with pytest.raises(ValueError, match="principal point"):
         camera_from_nerf_pose(c2w, 100.0, 64, 48, 30.0, 24.0, **kw)
+    bad = c2w.copy()
+    bad[0, 3] = np.nan
+    with pytest.raises(ValueError, match=r"the pose is not finite \(1 NaN or infinite entries\)"):
+        camera_from_nerf_pose(bad, 100.0, 64, 48, 32.0, 24.0, **kw)
+    with pytest.raises(ValueError, match="must be a 4 x 4 or 3 x 4 matrix, got shape"):
+        camera_from_nerf_pose(np.eye(3), 100.0, 64, 48, 32.0, 24.0, **kw)
 
 
 def test_arc_rig_at_given_angles_and_binning_is_recorded():

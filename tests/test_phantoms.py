@@ -71,6 +71,28 @@ def test_bad_volume_files_fail_clearly(tmp_path, volume, message):
         PHANTOMS.build({"name": "file", "path": str(tmp_path / "v.npy"), "voxel_mm": 1, "T0": 296.15, "n0": 1.00027})
 
 
+@pytest.mark.parametrize("name, content", [
+    ("garbage.npy", b"this is not an array at all" * 10),
+    ("truncated.npy", None),
+    ("pickled.npy", "pickle"),
+    ("garbage.npz", b"PK\x03\x04 not a zip"),
+    ("garbage.h5", b"\x89HDF nope"),
+])
+def test_unreadable_volume_files_are_one_sentence_naming_the_file(tmp_path, name, content):
+    path = tmp_path / name
+    if content is None:
+        np.save(path, np.ones((8, 8, 8)))
+        path.write_bytes(path.read_bytes()[:200])
+    elif content == "pickle":
+        np.save(path, np.array([{"T": 300.0}], dtype=object), allow_pickle=True)
+    else:
+        path.write_bytes(content)
+    with pytest.raises(ValueError) as e:
+        PHANTOMS.build({"name": "file", "path": str(path), "voxel_mm": 1, "T0": 296.15, "n0": 1.00027})
+    assert str(e.value).startswith(f"cannot read volume file {path}: it is not a valid {path.suffix} file")
+    assert "allow_pickle" not in str(e.value)
+
+
 def test_missing_file_and_ambiguous_archive(tmp_path):
     with pytest.raises(FileNotFoundError, match="does not exist"):
         PHANTOMS.build({"name": "file", "path": str(tmp_path / "nope.npy"), "voxel_mm": 1, "T0": 296, "n0": 1.0003})

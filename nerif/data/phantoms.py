@@ -7,6 +7,7 @@ with the ambient state that converts it to refractive index.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import zipfile
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -164,12 +165,26 @@ def gaussian_blob_deflection(origins: torch.Tensor, dirs: torch.Tensor, centre_m
 
 
 def _read_array(path: Path, key: Optional[str]) -> np.ndarray:
+    """The volume in ``path`` (never unpickling anything); one sentence naming the file when it is unreadable."""
     suffix = path.suffix.lower()
+    if suffix not in (".npy", ".npz", ".mat", ".h5", ".hdf5"):
+        raise ValueError(f"cannot read volume file {path}: use .npy, .npz, .mat, .h5 or .hdf5")
+    try:
+        return _read_store(path, suffix, key)
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as e:
+        if isinstance(e, ValueError) and str(e).startswith(str(path)):
+            raise  # our own sentence
+        raise ValueError(f"cannot read volume file {path}: it is not a valid {suffix} file (corrupt, truncated, or "
+                         "holding pickled objects, which nerif does not load)") from None
+
+
+def _read_store(path: Path, suffix: str, key: Optional[str]) -> np.ndarray:
     if suffix == ".npy":
-        return np.load(path)
+        return np.load(path, allow_pickle=False)
     if suffix in (".npz", ".mat", ".h5", ".hdf5"):
         if suffix == ".npz":
-            store = dict(np.load(path))
+            with np.load(path, allow_pickle=False) as f:
+                store = {k: f[k] for k in f.files}
         elif suffix == ".mat":
             try:
                 import scipy.io
@@ -191,7 +206,6 @@ def _read_array(path: Path, key: Optional[str]) -> np.ndarray:
         if key not in store:
             raise ValueError(f"{path} has no array '{key}'; it holds {sorted(store)}")
         return np.asarray(store[key])
-    raise ValueError(f"cannot read volume file {path}: use .npy, .npz, .mat, .h5 or .hdf5")
 
 
 @PHANTOMS.register("file")

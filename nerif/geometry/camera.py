@@ -93,8 +93,10 @@ def camera_from_nerf_pose(c2w, focal_px: float, width: int, height: int, cx: flo
     the right axis, and the result is a proper rotation again.
     """
     c2w = np.asarray(c2w, dtype=np.float64)
-    if c2w.shape not in ((4, 4), (3, 4)) or not np.all(np.isfinite(c2w)):
-        raise ValueError(f"{name}: a pose must be a finite 4 x 4 or 3 x 4 matrix, got shape {c2w.shape}")
+    if c2w.shape not in ((4, 4), (3, 4)):
+        raise ValueError(f"{name}: a pose must be a 4 x 4 or 3 x 4 matrix, got shape {c2w.shape}")
+    if not np.all(np.isfinite(c2w)):
+        raise ValueError(f"{name}: the pose is not finite ({int(np.sum(~np.isfinite(c2w)))} NaN or infinite entries)")
     if abs(cx - width / 2) > 1e-6 or abs(cy - height / 2) > 1e-6:
         raise ValueError(f"{name}: principal point ({cx}, {cy}) px is not the sensor centre "
                          f"({width / 2}, {height / 2}); off-centre principal points are not supported")

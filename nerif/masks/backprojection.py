@@ -85,11 +85,22 @@ def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2,
     return out
 
 
-def masks_2d(scene, threshold: float, radius_px: int, noise_sigmas: float) -> list[np.ndarray]:
-    """The 2-D masks that came with the data, else :func:`deflection_masks`."""
-    if scene.mask_images is not None:
-        return [np.asarray(m, dtype=bool) for m in scene.mask_images]
-    return deflection_masks(scene, threshold, radius_px, noise_sigmas)
+def masks_2d(scene, threshold: float = 0.001, radius_px: int = 2, noise_sigmas: float = 4.0) -> list[np.ndarray]:
+    """:func:`deflection_masks`, joined with the 2-D masks that came with the data where there are some.
+
+    A mask that came with the data may leave out rays that are clearly deflected: the paper's Phantom 1 masks
+    leave out the rows at the top and bottom of the box's image, where the flame and the fuel jet cross the box
+    (3 % of the deflection energy, at 20 % of the RMS deflection inside). Back-projected alone, they carve the
+    flame at those faces: a novel view's held-out error was 0.89 with ``mask=3d`` against 0.43 with ``mask=2d``.
+    """
+    ours = deflection_masks(scene, threshold, radius_px, noise_sigmas)
+    if scene.mask_images is None:
+        return ours
+    out = []
+    for v, m in enumerate(ours):
+        region = scene.view_image(v, np.ones(len(scene.dirs[scene.view_slice(v)])), 0.0) > 0
+        out.append(fill_holes(np.asarray(scene.mask_images[v], dtype=bool) | m, region))
+    return out
 
 
 def back_project(box: ProbeBox, cameras, images: list[np.ndarray], n_cameras_required: int | None = None) -> np.ndarray:
@@ -139,7 +150,7 @@ def ambient_faces(setting, scene, masks: Masks, min_cover: float, fallback) -> t
         if images is None:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # an empty view is reported by the masks that use it
-                images = scene.mask_images if scene.mask_images is not None else deflection_masks(scene)
+                images = masks_2d(scene)
         hull = back_project(scene.box, scene.cameras, images)
     crossed = crossed_faces(hull, min_cover)
     if setting == "auto":
