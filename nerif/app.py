@@ -11,6 +11,7 @@ from omegaconf import DictConfig
 
 from nerif.configs import check_complete, group
 from nerif.data import DATASETS
+from nerif.data.scene import view_directions
 from nerif.io.export import write_json, write_npz, write_png, write_vti
 from nerif.io.folders import check_writable
 from nerif.io.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
@@ -54,6 +55,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     scene = DATASETS.build(group(cfg, "data"), device=str(device))
     masks = MASKS.build(group(cfg, "mask"), scene=scene)
     solver.setup(scene, masks)
+    warnings = ill_posed(scene)
     tc = cfg.train
     write_masks(masks, scene, out_dir)
     write_sensing(scene, out_dir)
@@ -92,6 +94,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
         writer.close()
 
     metrics = write_outputs(solver, scene, out_dir, losses)
+    metrics["warnings"] = warnings + metrics.get("warnings", [])
     metrics.update(setup_time_s=setup_s, device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
     if device.type == "cuda":
         metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
@@ -99,6 +102,17 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     write_json(metrics, out_dir / "metrics.json")
     print(summary_line(metrics, out_dir), flush=True)
     return metrics
+
+
+def ill_posed(scene) -> list[str]:
+    """Warnings (logged, and returned for ``metrics.json``) where the data cannot fix a 3-D field."""
+    n = view_directions(scene.cameras)
+    if n >= 3:
+        return []
+    msg = (f"ill-posed: the {scene.n_views} training view(s) look along only {n} distinct direction(s); a 3-D "
+           "field needs at least 3, and the reconstruction is not to be trusted away from what they see")
+    log.warning("%s", msg)
+    return [msg]
 
 
 def write_masks(masks, scene, out_dir: Path) -> None:
@@ -202,8 +216,7 @@ def summary_line(m: dict, out_dir: Path) -> str:
             held.append(f"displacement RMSE {m['heldout_displacement_rmse_px']:.3g} px, PSNR "
                         f"{m['heldout_displacement_psnr_db']:.1f} dB")
         parts.append("held out: " + "; ".join(held))
-    if m.get("warning"):
-        parts.append(f"WARNING: {m['warning']}")
+    parts += [f"WARNING: {w}" for w in m.get("warnings", [])]
     parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training ({m['ms_per_iteration']:.1f} ms/it), "
                  f"{m['total_time_s']:.0f} s in all")
     return "nerif: " + " | ".join(parts) + f" | {out_dir}"

@@ -156,5 +156,5 @@ def test_a_flame_at_the_prior_bound_is_reported_with_the_setting_to_raise():
     sigma[:2] = -1.05  # 40 % of the flame pinned at the bound (data.T_max=2000 holds at most 2808 K)
     out = tr.saturation(sigma)
     assert out["flame_at_prior_bound"] == pytest.approx(0.4)
-    assert out["warning"].startswith("40.0 % of the flame sits at the hottest 2808 K the field can hold "
-                                     "(data.T_max=2000 K)") and "raise data.T_max" in out["warning"]
+    assert len(out["warnings"]) == 1 and out["warnings"][0].startswith("40.0 % of the flame sits at the hottest 2808 K the field can hold "
+                                     "(data.T_max=2000 K)") and "raise data.T_max" in out["warnings"][0]

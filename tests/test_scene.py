@@ -87,3 +87,28 @@ def test_non_finite_estimates_are_masked_with_a_warning(caplog):
         ok = finite_or_masked(u, "view 3")
     assert ok.sum() == 18 and not ok[1, 2] and not ok[3, 4]
     assert "view 3: 2 of 20 displacement estimates are not finite" in caplog.text
+
+
+@pytest.mark.parametrize("sensing", ["ideal", "perpendicular"])
+def test_deflection_noise_has_the_asked_rms_and_is_perpendicular_when_only_that_is_measured(sensing):
+    base = {"name": "synthetic", "phantom": BLOB, "rig": RIG, "T_max": 2000.0, "render_supersample": 1,
+            "sensing": sensing}
+    clean = DATASETS.build(base)
+    noisy = DATASETS.build({**base, "deflection_noise": 0.2, "noise_seed": 3})
+    n = (noisy.eps - clean.eps).double()
+    rms = float(clean.eps.double().norm(dim=-1).pow(2).mean().sqrt())
+    assert float(n.norm(dim=-1).pow(2).mean().sqrt()) == pytest.approx(0.2 * rms, rel=1e-4)
+    along = (n * clean.dirs.double()).sum(-1).abs().max()
+    assert (along < 1e-6 * rms) if sensing == "perpendicular" else (along > 0.05 * rms)
+    torch.testing.assert_close(DATASETS.build({**base, "deflection_noise": 0.2, "noise_seed": 3}).eps, noisy.eps)
+    with pytest.raises(ValueError, match="data.deflection_noise=-0.1"):
+        DATASETS.build({**base, "deflection_noise": -0.1})
+
+
+def test_distinct_view_directions():
+    from nerif.data.scene import view_directions
+    from nerif.geometry.camera import arc_rig
+
+    assert view_directions(arc_rig(n_cameras=12)) == 12
+    assert view_directions(arc_rig(angles_deg=[30.0, 30.0, 30.0])) == 1  # three views at one angle
+    assert view_directions(arc_rig(angles_deg=[0.0, 180.0, 90.0, 90.5])) == 2  # opposite and near views are one

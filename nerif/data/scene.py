@@ -143,6 +143,17 @@ def scene_from_images(box: ProbeBox, ambient: Ambient, cameras: list[Camera], ep
                  perpendicular_only=True, **fields)
 
 
+def view_directions(cameras: list[Camera], tol_deg: float = 1.0) -> int:
+    """How many distinct directions the cameras look along (axes within ``tol_deg`` count as one, as do opposite
+    ones: a ray and its reverse see the same line integral)."""
+    axes = [np.asarray(c.rotation)[:, 2] for c in cameras]
+    distinct: list[np.ndarray] = []
+    for a in axes:
+        if all(abs(float(a @ b)) < np.cos(np.deg2rad(tol_deg)) for b in distinct):
+            distinct.append(a)
+    return len(distinct)
+
+
 def heldout_views(heldout, n_views: int) -> list[int]:
     """Sorted distinct held-out view indices, checked: within range and leaving a view to train on."""
     held = sorted({int(v) for v in heldout})
@@ -205,7 +216,7 @@ def keep_rays(dirs, eps, pixel, view_start, keep: torch.Tensor):
 @DATASETS.register("synthetic", hints={"binning": "rig.binning"})
 def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", sensor: Optional[dict] = None,
               render_supersample: int = 4, render_step_mm: Optional[float] = None, cache_dir: Optional[str] = None,
-              device: str = "cpu") -> Scene:
+              deflection_noise: float = 0.0, noise_seed: int = 0, device: str = "cpu") -> Scene:
     """A phantom seen by a synthetic rig; observations from the voxel forward model.
 
     Args:
@@ -219,8 +230,13 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
             2 mm, 0.7% at 0.5 mm); the reconstruction is evaluated on the phantom's own grid.
         render_step_mm: quadrature step of the observations (default half a rendering voxel).
         cache_dir: where observations are cached, keyed by the config that made them (None: no cache).
+        deflection_noise: Gaussian noise added to the observed deflections, as a fraction of their RMS magnitude
+            (the RMS magnitude of the noise vectors; perpendicular to each ray where only that part is measured),
+            drawn with ``noise_seed``.
     """
     SENSING.get(sensing)  # an unknown name fails here, before any rendering
+    if not 0.0 <= deflection_noise < 10.0:
+        raise ValueError(f"data.deflection_noise={deflection_noise}: a fraction of the RMS deflection, within [0, 10)")
     sensor = dict(sensor or {}) if sensing == "realistic" else {}  # the only sensing with parameters
     ph = PHANTOMS.build(phantom)
     ambient = Ambient(ph.T0, ph.n0, float(T_max))
@@ -243,5 +259,21 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
     keep = torch.as_tensor(finite_or_masked(eps.cpu().numpy(), f"{sensing} sensing"), device=device)
     if not keep.all():
         dirs, eps, pixel, view_start = keep_rays(dirs, eps, pixel, view_start, keep)
+    measured_only = sensing != "ideal"  # every sensing but ideal goes through image displacements
+    if deflection_noise > 0:
+        eps = with_noise(eps, dirs if measured_only else None, deflection_noise, noise_seed)
     return Scene(ph.box, ambient, cameras, origins, dirs, eps.to(device), pixel, view_start, ph.T, record,
-                 perpendicular_only=sensing != "ideal")  # every sensing but ideal goes through image displacements
+                 perpendicular_only=measured_only)
+
+
+def with_noise(eps: torch.Tensor, dirs: Optional[torch.Tensor], fraction: float, seed: int) -> torch.Tensor:
+    """``eps`` (N, 3) plus Gaussian noise whose RMS magnitude is ``fraction`` of the RMS of ``|eps|``; the noise
+    lies perpendicular to ``dirs`` (N, 3) when given (2 components), else it has 3."""
+    g = torch.Generator().manual_seed(int(seed))
+    noise = torch.randn(eps.shape, generator=g, dtype=torch.float64)
+    if dirs is not None:
+        d = dirs.detach().cpu().double()
+        noise = noise - (noise * d).sum(-1, keepdim=True) * d
+    rms = eps.double().norm(dim=-1).pow(2).mean().sqrt().cpu()
+    noise = noise * (fraction * rms / noise.norm(dim=-1).pow(2).mean().sqrt())
+    return (eps.double() + noise.to(eps.device)).to(eps.dtype)

@@ -62,10 +62,10 @@ def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2,
     (:func:`fill_holes`). The fill matters: rays through the core of a symmetric flame are barely deflected, so the
     thresholded magnitude alone is hollow where the flame is hottest, and open to the edge where the box cuts it.
 
-    Returns (height, width) bool images. A view with no deflection above the threshold gets an empty mask
-    and a warning naming it.
+    Returns (height, width) bool images. A view with no deflection above the threshold gets an empty mask;
+    one warning names every such view.
     """
-    out = []
+    out, empty = [], []
     for v, cam in enumerate(scene.cameras):
         eps = scene.eps[scene.view_slice(v)].double().cpu().numpy()
         mag2 = (eps**2).sum(-1)
@@ -79,9 +79,11 @@ def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2,
             m = cv2.dilate(m, disc)
         m = fill_holes(m.astype(bool), scene.view_image(v, np.ones(len(eps)), 0.0) > 0)
         if not m.any():
-            warnings.warn(f"{cam.name}: no deflection above the mask threshold {threshold}; its 2-D mask is empty",
-                          stacklevel=2)
+            empty.append(cam.name)
         out.append(m)
+    if empty:
+        warnings.warn(f"{', '.join(empty)}: no deflection above the mask threshold {threshold}; "
+                      f"{'its 2-D mask is' if len(empty) == 1 else 'their 2-D masks are'} empty", stacklevel=2)
     return out
 
 
@@ -190,9 +192,14 @@ def mask_2d(scene, threshold: float = 0.001, radius_px: int = 2, noise_sigmas: f
 @MASKS.register("3d")
 def mask_3d(scene, threshold: float = 0.001, radius_px: int = 2, noise_sigmas: float = 4.0,
             n_cameras_required: int | None = None) -> Masks:
-    """2-D ray sampling plus the back-projected 3-D mask gating the field."""
+    """2-D ray sampling plus the back-projected 3-D mask gating the field. Views whose 2-D mask is empty (no
+    signal: a camera that failed, already warned about) are left out of the back-projection, which would
+    otherwise carve everything away."""
     images = masks_2d(scene, threshold, radius_px, noise_sigmas)
-    volume = back_project(scene.box, scene.cameras, images, n_cameras_required)
+    seeing = [v for v, m in enumerate(images) if m.any()]
+    need = None if n_cameras_required is None else max(1, int(n_cameras_required) - (len(images) - len(seeing)))
+    volume = back_project(scene.box, [scene.cameras[v] for v in seeing], [images[v] for v in seeing], need) \
+        if seeing else np.zeros(scene.box.shape, bool)
     if not volume.any():
         raise ValueError("the 3-D mask is empty: no voxel lies inside enough 2-D masks (lower mask.threshold, "
                          "raise mask.radius_px or lower mask.n_cameras_required)")

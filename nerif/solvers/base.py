@@ -142,7 +142,7 @@ class IterativeSolver:
             log.info("the flame crosses the probe box at %s (visual hull); ambient faces: %s%s", ", ".join(crossed),
                      ", ".join(faces) or "none", " (auto)" if setting == "auto" else "")
         both = sorted(set(crossed) & set(faces))
-        if both:
+        if both and setting != "auto":  # with auto, only the fallback (warned above) holds a crossed face
             log.warning("loss.ambient_faces holds sigma = 0 on %s, which the flame crosses: use "
                         "loss.ambient_faces=auto", ", ".join(both))
         return faces
@@ -164,7 +164,7 @@ class IterativeSolver:
 
     def saturation(self, sigma: np.ndarray) -> dict:
         """What a reconstruction ``sigma`` says about the solver's bounds, for ``metrics.json``: a bounded
-        solver reports the share of the flame at its bound, and a ``warning`` when that is sizeable. None here."""
+        solver reports the share of the flame at its bound, and ``warnings`` when that is sizeable. None here."""
         return {}
 
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:

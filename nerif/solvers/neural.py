@@ -114,8 +114,8 @@ class NeuralSolver(IterativeSolver):
                              f"{prior[0]:g}): set data.T_max={np.ceil(hottest / 50) * 50:.0f} or higher")
 
     def saturation(self, sigma: np.ndarray) -> dict:
-        """Share of the flame (voxels with sigma below -0.05) within 1 % of the prior's lower bound, and a
-        warning when it is over 1 %: the flame may be hotter than ``data.T_max`` lets the field be."""
+        """Share of the flame (voxels with sigma below -0.05) within 1 % of the prior's lower bound, and
+        ``warnings`` when it is over 1 %: the flame may be hotter than ``data.T_max`` lets the field be."""
         a, b = prior_interval(self.prior, self.scene.sigma_prior)
         flame = sigma < -0.05
         share = float((sigma[flame] <= a + 0.01 * (b - a)).mean()) if flame.any() else 0.0
@@ -124,9 +124,9 @@ class NeuralSolver(IterativeSolver):
             amb = self.scene.ambient
             what = (f"the hottest {amb.temperature_from_sigma(np.float64(a)):.0f} K the field can hold "
                     f"(data.T_max={amb.T_max:g} K)" if amb.temperature_known else f"the prior's bound sigma = {a:g}")
-            out["warning"] = (f"{100 * share:.1f} % of the flame sits at {what}: it may be hotter; raise "
-                              f"{'data.T_max' if amb.temperature_known else 'field.prior'}")
-            log.warning("%s", out["warning"])
+            out["warnings"] = [f"{100 * share:.1f} % of the flame sits at {what}: it may be hotter; raise "
+                               f"{'data.T_max' if amb.temperature_known else 'field.prior'}"]
+            log.warning("%s", out["warnings"][0])
         return out
 
     # --- batches ---
