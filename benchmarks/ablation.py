@@ -10,6 +10,7 @@ the other, so ratios between cells are measured side by side. Writes ``ablation.
 from __future__ import annotations
 
 import argparse
+import json
 import platform
 import time
 from pathlib import Path
@@ -36,14 +37,22 @@ def progress_table(rows: list[dict], out: Path) -> str:
     return text
 
 
-def run_cells(cells: list[str], settings: list[str], out: Path) -> list[dict]:
+def run_cells(cells: list[str], settings: list[str], out: Path, resume: bool = False) -> list[dict]:
     """Each cell (a string of overrides, plus ``settings``) through :func:`nerif.app.run`, one after the other in
-    this process; returns one row per cell: its metrics, total time and evaluation history."""
+    this process; returns one row per cell: its metrics, total time and evaluation history. ``resume``: a cell
+    whose folder already holds a ``metrics.json`` (a finished run of an interrupted benchmark) is read back, not
+    run again."""
     rows = []
     for i, cell in enumerate(cells):
         cfg = compose(list(settings) + cell.split() + ["train.progress=false"])
+        folder = out / f"{i}_{cell.replace(' ', '_').replace('=', '-')}"
         t0 = time.perf_counter()
-        m = run(cfg, out / f"{i}_{cell.replace(' ', '_').replace('=', '-')}")
+        if resume and (folder / "metrics.json").is_file():
+            m = json.loads((folder / "metrics.json").read_text())
+            m.setdefault("total_time_s", m.get("wall_time_s", 0.0))
+            t0 = time.perf_counter() - m["total_time_s"]
+        else:
+            m = run(cfg, folder)
         row = {"config": cell, "total_time_s": time.perf_counter() - t0,
                **{k: m[k] for k, _, _ in COLUMNS if k in m}, "device": m["device"], "history": m["history"]}
         rows.append(row)

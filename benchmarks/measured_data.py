@@ -2,6 +2,7 @@
 
     python benchmarks/measured_data.py                    # default scale, CPU: about 25 min on 2 cores
     python benchmarks/measured_data.py --only nerif       # the neural runs alone
+    python benchmarks/measured_data.py --resume           # after an interruption: finished runs are read back
     python benchmarks/measured_data.py --set device=cuda +experiment=paper_phantom5 --only nerif
 
 Runs, through ``nerif.app.run`` one after the other (:func:`benchmarks.ablation.run_cells`):
@@ -30,7 +31,7 @@ from nerif.configs import compose, group  # noqa: E402
 from nerif.data.phantoms import PHANTOMS  # noqa: E402
 from nerif.io.export import atomic_write, write_json  # noqa: E402
 
-TV_WEIGHTS = (1e-3, 3e-3, 1e-2, 3e-2, 1e-1, 3e-1)
+TV_WEIGHTS = (1e-3, 3e-3, 1e-2, 3e-2, 1e-1, 3e-1, 1.0, 3.0)
 
 
 def t_max_of(phantom: str) -> float:
@@ -97,10 +98,11 @@ def main(argv=None) -> dict:
     ap.add_argument("--only", choices=("all", "nerif", "cgls"), default="all")
     ap.add_argument("--set", nargs="*", default=[], help="overrides applied to every run")
     ap.add_argument("--out", default="benchmarks/results/measured_data", help="output folder")
+    ap.add_argument("--resume", action="store_true", help="read back the runs an interrupted benchmark finished")
     args = ap.parse_args(argv)
     out = Path(args.out)
     runs = cells(args.only)
-    table = run_cells(list(runs.values()), args.set, out)
+    table = run_cells(list(runs.values()), args.set, out, resume=args.resume)
     rows = dict(zip(runs, table))
     for name, row in rows.items():
         row["config"] = name

@@ -79,7 +79,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     def on_eval(m: dict) -> None:
         it = m["iteration"]
         for k, v in m.items():
-            if k != "iteration":
+            if k != "iteration" and isinstance(v, (int, float)):  # None: not defined here (no flame)
                 writer.add_scalar(f"eval/{k}", v, it)
         if it % tc.image_every == 0 or it == solver.iterations:
             writer.add_figure("slices", volume_slices(solver.reconstruction(), scene, f"iteration {it}"), it)

@@ -222,3 +222,13 @@ def test_help_says_what_nerif_does_and_lists_the_groups():
     assert r.stdout.startswith("nerif: 3-D refractive-index and temperature fields")
     assert "mask: 2d, 3d, none" in r.stdout and "solver: cgls, nerif" in r.stdout
     assert r.stdout.count("python -m nerif") >= 3
+
+
+def test_a_bug_keeps_its_traceback(tmp_path):
+    """Only the errors raised for bad input become one sentence; a KeyError from a bug is shown in full."""
+    code = ("import sys, nerif.__main__ as m\n"
+            "def broken(cfg, out):\n    return {}['missing']\n"
+            f"m.run = broken\nsys.argv = ['nerif', 'device=cpu', 'hydra.run.dir={tmp_path}']\nm.main()\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert r.returncode != 0
+    assert "Traceback" in r.stderr and "KeyError: 'missing'" in r.stderr and "in broken" in r.stderr

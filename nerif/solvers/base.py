@@ -158,8 +158,9 @@ class IterativeSolver:
             return {}
         amb, Tt = self.scene.ambient, self.scene.truth_T
         T = amb.temperature_from_sigma(sigma)
+        flame = flame_region(Tt, amb.T0, self.flame_threshold_K)
         return {"temperature_rmse_K": rmse(T, Tt),
-                "temperature_rmse_flame_K": rmse(T, Tt, flame_region(Tt, amb.T0, self.flame_threshold_K)),
+                "temperature_rmse_flame_K": rmse(T, Tt, flame) if flame.any() else None,  # None: no flame at all
                 "sigma_rmse": rmse(sigma, amb.sigma_from_temperature(Tt))}
 
     def saturation(self, sigma: np.ndarray) -> dict:
