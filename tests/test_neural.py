@@ -158,3 +158,21 @@ def test_a_flame_at_the_prior_bound_is_reported_with_the_setting_to_raise():
     assert out["flame_at_prior_bound"] == pytest.approx(0.4)
     assert len(out["warnings"]) == 1 and out["warnings"][0].startswith("40.0 % of the flame sits at the hottest 2808 K the field can hold "
                                      "(data.T_max=2000 K)") and "raise data.T_max" in out["warnings"][0]
+
+
+def test_a_run_stops_when_an_evaluation_no_longer_improves_the_fit(tmp_path):
+    """train.stop_when_converged: the relative improvement of the deflection RMSE on the fixed evaluation rays
+    between two evaluations; below it, the run ends there (and the checkpoint says so)."""
+    full = neural_solver("train.iterations=60", "train.eval_every=10")
+    full.fit(checkpoint_every=1000, progress=False)
+    rmse = [h["deflection_rmse"] for h in full.history]
+    gains = [(a - b) / a for a, b in zip(rmse, rmse[1:])]
+    tol = sorted(gains)[len(gains) // 2] + 1e-9  # the median gain: some evaluation falls short of it
+    first = next(i for i, g in enumerate(gains) if g < tol) + 2  # evaluations done when it stops
+    stopping = neural_solver("train.iterations=60", "train.eval_every=10", f"train.stop_when_converged={tol}")
+    stopping.fit(checkpoint_every=1000, checkpoint=tmp_path / "ck.pt", progress=False)
+    assert stopping.iteration == 10 * first < 60 and stopping.converged
+    assert [h["deflection_rmse"] for h in stopping.history] == rmse[:first]  # the same run, cut short
+    assert torch.load(tmp_path / "ck.pt", weights_only=False)["iteration"] == 10 * first
+    with pytest.raises(ValueError, match="train.stop_when_converged=2"):
+        neural_solver("train.stop_when_converged=2")

@@ -113,6 +113,7 @@ class IterativeSolver:
         self.step_times: list[float] = []
         self.labels = {"solver": self.name}  # what this run is, for outputs and tables
         self.report: dict = {}  # what the solver decided from the data, for metrics.json
+        self.converged = False  # set by a solver that stops early (its step's "converged" term, or evaluate)
 
     def setup(self, scene, masks) -> "IterativeSolver":
         """Give the solver its data: the scene (rays, observations, held-out views) and the masks. Subclasses
@@ -220,7 +221,8 @@ class IterativeSolver:
     def fit(self, *, checkpoint_every: int, checkpoint: Optional[Path] = None,
             on_eval: Optional[Callable[[dict], None]] = None, on_step: Optional[Callable[[int, dict], None]] = None,
             progress: bool = True, checkpoint_every_s: Optional[float] = None) -> dict:
-        """Run to ``iterations``; evaluates every :attr:`eval_every` and at the end, checkpoints (atomically)
+        """Run to ``iterations``, or until converged (a step's ``converged`` term, or :attr:`converged` set by an
+        evaluation); evaluates every :attr:`eval_every` and at the end, checkpoints (atomically)
         every ``checkpoint_every`` iterations, at most ``checkpoint_every_s`` seconds apart, at the end and on
         Ctrl-C or SIGTERM (then raises :class:`Interrupted`). An exception from ``step`` leaves the last good
         checkpoint in place."""
@@ -244,6 +246,7 @@ class IterativeSolver:
                             on_eval(last)
                         if "temperature_rmse_K" in last:
                             bar.set_postfix(loss=f"{terms['loss']:.3g}", T_rmse=f"{last['temperature_rmse_K']:.1f}K")
+                        done = done or self.converged
                     due = self.iteration % checkpoint_every == 0 or done or (
                         checkpoint_every_s is not None and time.monotonic() - saved_at >= checkpoint_every_s)
                     if checkpoint is not None and due:

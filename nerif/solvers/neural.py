@@ -35,7 +35,9 @@ class NeuralSolver(IterativeSolver):
         sampler: a :data:`SAMPLERS` config. loss: the ambient boundary condition (``ambient_faces``: ``auto`` or
             a list, ``crossed_cover``, ``ambient_fallback``, ``ambient_weight``, ``ambient_points``; see
             :class:`nerif.losses.AmbientBoundary` and :meth:`IterativeSolver.resolve_ambient_faces`).
-        train: ``iterations``, ``eval_every``, ``rays_per_batch``, ``views_per_batch`` (a number, or ``all``),
+        train: ``iterations``, ``eval_every``, ``stop_when_converged`` (stop once an evaluation improves the
+            deflection RMSE on the fixed evaluation rays by less than this fraction; null: never),
+            ``rays_per_batch``, ``views_per_batch`` (a number, or ``all``),
             ``outside_fraction`` (share of each view's rays drawn outside its 2-D mask), and Adam's ``lr``,
             ``betas``, ``eps`` with the cosine floor ``lr_min``.
         metrics, seed, label: see :class:`IterativeSolver`.
@@ -54,6 +56,9 @@ class NeuralSolver(IterativeSolver):
         if not (k == "all" or (isinstance(k, int) and not isinstance(k, bool) and k >= 1)):
             raise ValueError(f"train.views_per_batch must be a number of views (at least 1) or 'all', got {k!r}")
         self.views_per_batch = k
+        self.stop_tol = train["stop_when_converged"]
+        if self.stop_tol is not None and not 0.0 < float(self.stop_tol) < 1.0:
+            raise ValueError(f"train.stop_when_converged={self.stop_tol}: a relative improvement within (0, 1), or null")
         self.outside_fraction = float(train["outside_fraction"])
         if not 0.0 <= self.outside_fraction < 1.0:
             raise ValueError(f"outside_fraction must be within [0, 1), got {self.outside_fraction}")
@@ -258,6 +263,9 @@ class NeuralSolver(IterativeSolver):
             m[f"deflection_rmse_{n}"] = deflection_rmse(e, obs)
         m["deflection_rmse"] = m[f"deflection_rmse_{self.fitted_operator}"]
         m.update(self.heldout_errors())
+        if self.stop_tol is not None and self.history:
+            before = self.history[-1]["deflection_rmse"]
+            self.converged = before - m["deflection_rmse"] < float(self.stop_tol) * before
         self.history.append(m)
         return m
 
@@ -266,7 +274,7 @@ class NeuralSolver(IterativeSolver):
         return {**super().state_dict(), "field": self.field.state_dict(), "optimizer": self.optimizer.state_dict(),
                 "sampler": self.sampler.state_dict(), "scheduler": self.scheduler.state_dict(),
                 "generator": self.generator.get_state(), "samples_seen": self.samples_seen, "rays_seen": self.rays_seen,
-                "samples_max": self.samples_max, "rays_skipped": self.rays_skipped}
+                "samples_max": self.samples_max, "rays_skipped": self.rays_skipped, "converged": self.converged}
 
     def load_state_dict(self, st: dict) -> None:
         try:
@@ -281,6 +289,7 @@ class NeuralSolver(IterativeSolver):
         super().load_state_dict(st)
         for k in ("samples_seen", "rays_seen", "samples_max", "rays_skipped"):
             setattr(self, k, st[k])
+        self.converged = bool(st.get("converged", False))
 
     def timing(self) -> dict:
         return {**super().timing(), "samples_per_second": self.samples_seen / max(self.train_seconds, 1e-9),
