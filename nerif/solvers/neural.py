@@ -35,8 +35,9 @@ class NeuralSolver(IterativeSolver):
         sampler: a :data:`SAMPLERS` config. loss: the ambient boundary condition (``ambient_faces``: ``auto`` or
             a list, ``crossed_cover``, ``ambient_fallback``, ``ambient_weight``, ``ambient_points``; see
             :class:`nerif.losses.AmbientBoundary` and :meth:`IterativeSolver.resolve_ambient_faces`).
-        train: ``iterations``, ``eval_every``, ``stop_when_converged`` (stop once an evaluation improves the
-            deflection RMSE on the fixed evaluation rays by less than this fraction; null: never),
+        train: ``iterations``, ``eval_every``, ``stop_when_converged`` (stop once the best deflection RMSE on
+            the fixed evaluation rays over the last ``stop_patience`` evaluations improves on the best before them
+            by less than this fraction; null: never),
             ``rays_per_batch``, ``views_per_batch`` (a number, or ``all``),
             ``outside_fraction`` (share of each view's rays drawn outside its 2-D mask), and Adam's ``lr``,
             ``betas``, ``eps`` with the cosine floor ``lr_min``.
@@ -59,6 +60,9 @@ class NeuralSolver(IterativeSolver):
         self.stop_tol = train["stop_when_converged"]
         if self.stop_tol is not None and not 0.0 < float(self.stop_tol) < 1.0:
             raise ValueError(f"train.stop_when_converged={self.stop_tol}: a relative improvement within (0, 1), or null")
+        self.stop_patience = int(train["stop_patience"])
+        if self.stop_patience < 1:
+            raise ValueError(f"train.stop_patience={self.stop_patience}: at least 1 evaluation")
         self.outside_fraction = float(train["outside_fraction"])
         if not 0.0 <= self.outside_fraction < 1.0:
             raise ValueError(f"outside_fraction must be within [0, 1), got {self.outside_fraction}")
@@ -263,10 +267,13 @@ class NeuralSolver(IterativeSolver):
             m[f"deflection_rmse_{n}"] = deflection_rmse(e, obs)
         m["deflection_rmse"] = m[f"deflection_rmse_{self.fitted_operator}"]
         m.update(self.heldout_errors())
-        if self.stop_tol is not None and self.history:
-            before = self.history[-1]["deflection_rmse"]
-            self.converged = before - m["deflection_rmse"] < float(self.stop_tol) * before
         self.history.append(m)
+        rmses = [h["deflection_rmse"] for h in self.history]
+        if self.stop_tol is not None and len(rmses) > self.stop_patience:
+            # the best of the last `patience` evaluations against the best before them: one noisy evaluation
+            # (Adam early on, one view's batch) does not stop a run
+            before, recent = min(rmses[:-self.stop_patience]), min(rmses[-self.stop_patience:])
+            self.converged = recent > (1.0 - float(self.stop_tol)) * before
         return m
 
     # --- checkpoints ---
