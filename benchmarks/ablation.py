@@ -62,6 +62,13 @@ def run_cells(cells: list[str], settings: list[str], out: Path, resume: bool = F
     return rows
 
 
+def write_report(out: Path, stem: str, payload: dict, text: str) -> None:
+    """``<stem>.json`` (the payload) and ``<stem>.md`` (the text) in ``out``, atomically; the text printed."""
+    write_json(payload, out / f"{stem}.json")
+    atomic_write(out / f"{stem}.md", lambda t: Path(t).write_text(text))
+    print(text, flush=True)
+
+
 def header(settings: list[str], rows: list[dict]) -> str:
     return (f"`{' '.join(settings) or 'default scene'}`; device {rows[0]['device']}, torch {torch.__version__}, "
             f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} CPU threads")

@@ -25,11 +25,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ablation import header, progress_table, run_cells  # noqa: E402
+from ablation import header, progress_table, run_cells, write_report  # noqa: E402
 
 from nerif.configs import compose, group  # noqa: E402
 from nerif.data.phantoms import PHANTOMS  # noqa: E402
-from nerif.io.export import atomic_write, write_json  # noqa: E402
 
 TV_WEIGHTS = (1e-3, 3e-3, 1e-2, 3e-2, 1e-1, 3e-1, 1.0, 3.0)
 
@@ -111,9 +110,7 @@ def main(argv=None) -> dict:
     if table2:
         text += "\nT RMSE [K] against iterations, realistic Phantom 5 (the paper's Table 2 layout):\n\n"
         text += progress_table(table2, out)
-    write_json({"settings": args.set, "rows": rows}, out / "measured_data.json")
-    atomic_write(out / "measured_data.md", lambda t: Path(t).write_text(text))
-    print(text)
+    write_report(out, "measured_data", {"settings": args.set, "rows": rows}, text)
     return rows
 
 

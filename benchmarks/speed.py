@@ -19,9 +19,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ablation import header, run_cells  # noqa: E402
+from ablation import header, run_cells, write_report  # noqa: E402
 
-from nerif.io.export import atomic_write, write_json  # noqa: E402
 
 VARIANTS = {
     "default (mixed views, discrete, 3d, occupancy)": "",
@@ -76,9 +75,7 @@ def main(argv=None) -> dict:
     text = f"Time to accuracy, {header(settings, table_rows)}\n\n{table(rows)}"
     text += ("\nPeak memory on the CPU is the process's maximum resident set so far (the largest variant up to "
              "that row); on a GPU, the run's own peak allocation.\n")
-    write_json({"settings": settings, "rows": rows}, out / "speed.json")
-    atomic_write(out / "speed.md", lambda t: Path(t).write_text(text))
-    print(text)
+    write_report(out, "speed", {"settings": settings, "rows": rows}, text)
     return rows
 
 

@@ -16,18 +16,21 @@ import logging
 import math
 import time
 import warnings
+import sys
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from nerif.app import ill_posed
-from nerif.configs import compose, group
-from nerif.data import DATASETS
-from nerif.io.export import atomic_write, write_json
-from nerif.masks import MASKS
-from nerif.metrics import rmse
-from nerif.solvers import SOLVERS
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from ablation import write_report  # noqa: E402
+from nerif.app import ill_posed  # noqa: E402
+from nerif.configs import compose, group  # noqa: E402
+from nerif.data import DATASETS  # noqa: E402
+from nerif.masks import MASKS  # noqa: E402
+from nerif.metrics import rmse  # noqa: E402
+from nerif.solvers import SOLVERS  # noqa: E402
 
 # rays 1.4 mm apart at the blob (binning 10) and a hash no finer than they resolve (24 cells across the box);
 # with 2.8 mm rays (binning 20) the default 96-cell hash fits the 2,300 rays without the blob (44 of 46 K)
@@ -134,9 +137,7 @@ def main(argv=None) -> dict:
     bad = [n for n, r in rows.items() if any(r.get(k, 0) for k in
                                              ("nonfinite_sigma", "nonfinite_T", "nonfinite_history"))]
     text = table(rows) + ("\nNo NaN or inf anywhere.\n" if not bad else f"\nNaN or inf in: {', '.join(bad)}\n")
-    write_json({"settings": args.set, "rows": rows}, out / "stress.json")
-    atomic_write(out / "stress.md", lambda t: Path(t).write_text(text))
-    print(text)
+    write_report(out, "stress", {"settings": args.set, "rows": rows}, text)
     return rows
 
 
