@@ -55,7 +55,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     scene = DATASETS.build(group(cfg, "data"), device=str(device))
     masks = MASKS.build(group(cfg, "mask"), scene=scene)
     solver.setup(scene, masks)
-    warnings = ill_posed(scene)
+    rig_warnings = ill_posed(scene)
     tc = cfg.train
     write_masks(masks, scene, out_dir)
     write_sensing(scene, out_dir)
@@ -94,7 +94,7 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
         writer.close()
 
     metrics = write_outputs(solver, scene, out_dir, losses)
-    metrics["warnings"] = warnings + metrics.get("warnings", [])
+    metrics["warnings"] = rig_warnings + metrics.get("warnings", [])
     metrics.update(setup_time_s=setup_s, device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
     if device.type == "cuda":
         metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30

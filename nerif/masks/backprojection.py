@@ -54,6 +54,11 @@ def noise_level(eps_image: np.ndarray) -> float:
     return float(1.4826 * np.median(d) / np.sqrt(6.0)) if d.size else 0.0
 
 
+def box_image(scene, view: int) -> np.ndarray:
+    """(height, width) bool: the pixels of ``view`` whose rays cross the probe box (the box's image)."""
+    return scene.view_image(view, np.ones(len(scene.dirs[scene.view_slice(view)])), 0.0) > 0
+
+
 def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2,
                      noise_sigmas: float = 4.0) -> list[np.ndarray]:
     """Per view: ``|eps|^2 / max |eps|^2 > threshold`` and ``|eps| > noise_sigmas`` times the view's noise level
@@ -77,7 +82,7 @@ def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2,
         if radius_px > 0:
             disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
             m = cv2.dilate(m, disc)
-        m = fill_holes(m.astype(bool), scene.view_image(v, np.ones(len(eps)), 0.0) > 0)
+        m = fill_holes(m.astype(bool), box_image(scene, v))
         if not m.any():
             empty.append(cam.name)
         out.append(m)
@@ -100,8 +105,7 @@ def masks_2d(scene, threshold: float = 0.001, radius_px: int = 2, noise_sigmas: 
         return ours
     out = []
     for v, m in enumerate(ours):
-        region = scene.view_image(v, np.ones(len(scene.dirs[scene.view_slice(v)])), 0.0) > 0
-        out.append(fill_holes(np.asarray(scene.mask_images[v], dtype=bool) | m, region))
+        out.append(fill_holes(np.asarray(scene.mask_images[v], dtype=bool) | m, box_image(scene, v)))
     return out
 
 

@@ -82,7 +82,7 @@ class NeuralSolver(IterativeSolver):
         """The field on the scene's probe box (gated by ``masks.gate``), its optimiser, and the ray pools training
         draws from (``masks.inside``)."""
         super().setup(scene, masks)
-        prior = prior_interval(self.prior, scene.sigma_prior)
+        self.interval = prior = prior_interval(self.prior, scene.sigma_prior)  # the field's sigma bounds (a, b)
         self._check_truth_within(prior)
         self.field = NeuralField(self.encoder, scene.box, hidden=self.hidden, prior=prior, gate=masks.gate)
         self.field.to(self.device)
@@ -125,7 +125,7 @@ class NeuralSolver(IterativeSolver):
     def saturation(self, sigma: np.ndarray) -> dict:
         """Share of the flame (voxels with sigma below -0.05) within 1 % of the prior's lower bound, and
         ``warnings`` when it is over 1 %: the flame may be hotter than ``data.T_max`` lets the field be."""
-        a, b = prior_interval(self.prior, self.scene.sigma_prior)
+        a, b = self.interval
         flame = sigma < -0.05
         share = float((sigma[flame] <= a + 0.01 * (b - a)).mean()) if flame.any() else 0.0
         out = {"flame_at_prior_bound": share}
