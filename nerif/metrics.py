@@ -35,3 +35,14 @@ def psnr_db(pred: torch.Tensor, obs: torch.Tensor, peak: float | None = None) ->
     mse = float(((pred.double() - obs) ** 2).mean())
     peak = value_range(obs) if peak is None else peak
     return float("inf") if mse == 0 else 10.0 * float(np.log10(peak**2 / mse))
+
+
+def select_by_heldout(runs: dict) -> object:
+    """The key of the run (key -> its metrics) that predicts the held-out rays best: the lowest
+    ``heldout_deflection_rmse``. A choice made from the data alone, never from errors against a truth, so that it
+    is the choice a user without the truth would make (a regularisation weight, a stopping point)."""
+    scored = {k: m["heldout_deflection_rmse"] for k, m in runs.items() if m.get("heldout_deflection_rmse") is not None}
+    if not scored:
+        raise ValueError("no run has held-out rays to choose by (hold out views: data.heldout_split or "
+                         "data.heldout_views)")
+    return min(scored, key=scored.get)

@@ -27,7 +27,7 @@ def test_hash_index_matches_instant_ngp_spatial_hash():
 
 
 def test_smoothstep_hash_has_second_derivatives_that_train_its_table():
-    enc = HashGrid(n_levels=4, base_resolution=4, max_resolution=32, log2_table_size=12)
+    enc = HashGrid(n_levels=4, base_resolution=4, max_resolution=32, log2_table_size=12, interpolation="smoothstep")
     with torch.no_grad():
         enc.table.uniform_(-1, 1)
     x = (torch.rand(64, 3) * 1.6 - 0.8).requires_grad_(True)
@@ -55,3 +55,27 @@ def test_table_gather_gradients_pass_gradcheck_twice():
     index = torch.tensor([0, 3, 3, 8, 1, 3])
     assert torch.autograd.gradcheck(lambda t: _Gather.apply(t, index), (table,))
     assert torch.autograd.gradgradcheck(lambda t: _Gather.apply(t, index), (table,))
+
+
+def test_a_ramp_is_exact_with_trilinear_weights_and_a_staircase_with_smoothstep():
+    """One dense level whose node values are a ramp in x: trilinear weights give the ramp everywhere (slope 1);
+    smoothstep weights are flat at every node, so the slope there is 0 and 1.5 mid-cell (why the default is
+    trilinear: a staircase at each level's cell size is structure the few views of a BOS rig cannot cancel)."""
+    r = 8
+    x = torch.linspace(-0.95, 0.95, 101)
+    p = torch.stack([x, torch.zeros_like(x), torch.zeros_like(x)], -1).requires_grad_(True)
+    slopes = {}
+    for interp in ("linear", "smoothstep"):
+        enc = HashGrid(n_levels=1, n_features=1, base_resolution=r, max_resolution=r, log2_table_size=12,
+                       interpolation=interp)
+        stride = int(enc.mult[0, 1])
+        idx = torch.arange(enc.table.shape[0])
+        with torch.no_grad():
+            enc.table[:, 0] = (idx % stride).float() / r  # node value = node x in [0, 1]: a ramp of slope 1 / 2
+        (g,) = torch.autograd.grad(enc(p).sum(), p)
+        slopes[interp] = g[:, 0] * 2  # per unit of u = (x + 1) / 2
+    torch.testing.assert_close(slopes["linear"], torch.ones(101), atol=1e-4, rtol=0)
+    u = (x + 1) / 2 * r
+    t = u - u.floor()
+    torch.testing.assert_close(slopes["smoothstep"], 6 * t * (1 - t), atol=1e-3, rtol=0)
+    assert float(slopes["smoothstep"].min()) < 0.1 and float(slopes["smoothstep"].max()) > 1.4

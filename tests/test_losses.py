@@ -4,7 +4,7 @@ import torch
 from nerif.encoders import ENCODERS
 from nerif.field import NeuralField
 from nerif.geometry import ProbeBox
-from nerif.losses import AmbientBoundary, deflection_mse
+from nerif.losses import AmbientBoundary, TotalVariation, deflection_mse
 
 BOX = ProbeBox((10, 20, 16), 1.0)
 
@@ -38,3 +38,29 @@ def test_deflection_mse_weights_the_terms():
     assert deflection_mse(eps, obs, {"auto": 0.5, "discrete": 1.0}).item() == pytest.approx(1.5 + 12.0)
     with pytest.raises(ValueError, match="nothing to train on"):
         deflection_mse(eps, obs, {"auto": 0.0, "discrete": 0.0})
+
+
+class _Linear(torch.nn.Module):
+    """sigma = g . p: |grad sigma| = |g| everywhere."""
+
+    def __init__(self, g):
+        super().__init__()
+        self.g = torch.nn.Parameter(torch.as_tensor(g, dtype=torch.float32))
+
+    def forward(self, p):
+        return p @ self.g
+
+
+def test_total_variation_of_a_linear_field():
+    """A linear field's forward differences are exact: the term is weight * s * h * |g| (+ the tiny eps)."""
+    box = ProbeBox((10, 20, 16), 0.5)
+    tv = TotalVariation(box, weight=0.3, points=64, scale=2.0, eps=1e-6)
+    field = _Linear([0.3, -0.4, 1.2])
+    assert tv(field, torch.Generator().manual_seed(0)).item() == pytest.approx(0.3 * 2.0 * 0.5 * 1.3, rel=1e-5)
+    # a constant has none, and its weight scales with the deflections (sigma -> c sigma: c^2, like the misfit)
+    assert tv(_Linear([0.0, 0.0, 0.0])).item() == pytest.approx(0.0, abs=1e-5)
+    big = TotalVariation(box, weight=0.3, points=64, scale=6.0, eps=1e-6)
+    assert big(_Linear([0.9, -1.2, 3.6])).item() == pytest.approx(9 * tv(field).item(), rel=1e-5)
+    assert not TotalVariation(box, weight=0.0, points=64, scale=1.0).active
+    with pytest.raises(ValueError, match="cannot be negative"):
+        TotalVariation(box, weight=-1.0, points=64, scale=1.0)

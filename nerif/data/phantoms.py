@@ -43,11 +43,11 @@ class Phantom:
         return delta_from_n(n_from_temperature(self.T, self.T0, self.n0), self.n0)
 
 
-def phantom5_temperature(x, y, z, T0: float = 296.15):
+def phantom5_temperature(x, y, z, T0: float = 296.15, exp=np.exp):
     """The paper's analytic Phantom 5 [K] at coordinates [mm] (box x, z in [-36, 36], y in [-50, 50]): rises of
-    1196.85 K and 696.85 K over the ambient ``T0`` (the paper's: 296.15 K)."""
+    1196.85 K and 696.85 K over the ambient ``T0`` (the paper's: 296.15 K). ``exp``: torch.exp for tensors."""
     def g(x, y, z):
-        return np.exp(-(((3 * z**2 + 3 * x**2) / 20**2 + 3 * y**2 / 80**2 - 0.9) ** 2))
+        return exp(-(((3 * z**2 + 3 * x**2) / 20**2 + 3 * y**2 / 80**2 - 0.9) ** 2))
 
     return (T0 + 1196.85 * g(x, y - 50, z)
             + 696.85 * (g(x, y - 50, z - 25) + g(x, y - 50, z + 25) + g(x, y + 50, z - 25) + g(x, y + 50, z + 25)))
@@ -83,14 +83,16 @@ def _cylinder_coordinates(box: ProbeBox) -> tuple[np.ndarray, np.ndarray]:
 
 def lifted_jet_profile(r: np.ndarray, y: np.ndarray, T0: float, T_peak: float, lift_mm: float = -30.0,
                        base_radius_mm: float = 12.0, flame_length_mm: float = 55.0, thickness_mm: float = 4.0,
-                       spread: float = 0.08, base_mm: float = 3.0) -> np.ndarray:
+                       spread: float = 0.08, base_mm: float = 3.0, exp=np.exp, tanh=np.tanh,
+                       clip=np.clip) -> np.ndarray:
     """A lifted-jet-like flame T(r, y) [K]: a hot conical sheet that stabilises ``lift_mm`` high (over
-    ``base_mm``), closes ``flame_length_mm`` above it into a hot core, and thickens with height."""
+    ``base_mm``), closes ``flame_length_mm`` above it into a hot core, and thickens with height. ``exp``,
+    ``tanh``, ``clip``: torch.exp, torch.tanh, torch.clamp for tensors."""
     h = y - lift_mm
-    r_f = base_radius_mm * np.clip(1 - h / flame_length_mm, 0, 1)
-    w = thickness_mm + spread * np.clip(h, 0, None)
-    onset = 0.5 * (1 + np.tanh(h / base_mm))
-    return T0 + (T_peak - T0) * onset * np.exp(-(((r - r_f) / w) ** 2))
+    r_f = base_radius_mm * clip(1 - h / flame_length_mm, 0, 1)
+    w = thickness_mm + spread * clip(h, 0, None)
+    onset = 0.5 * (1 + tanh(h / base_mm))
+    return T0 + (T_peak - T0) * onset * exp(-(((r - r_f) / w) ** 2))
 
 
 @PHANTOMS.register("axisymmetric")
@@ -208,21 +210,29 @@ def _read_store(path: Path, suffix: str, key: Optional[str]) -> np.ndarray:
         return np.asarray(store[key])
 
 
-@PHANTOMS.register("file")
-def volume_file(path: str, voxel_mm: float, T0: float, n0: float, quantity: str = "temperature",
-                key: Optional[str] = None) -> Phantom:
-    """A volume (nx, ny, nz) of temperature [K] or refractive index from ``.npy/.npz/.mat/.h5`` (e.g. a DNS
-    snapshot), with its voxel size [mm] and ambient state; the box is centred on the volume."""
+def read_volume(path: str, what: str, key: Optional[str] = None) -> np.ndarray:
+    """A finite volume (nx, ny, nz) from a ``.npy/.npz/.mat/.h5`` file, as float64; one sentence naming ``what``
+    (the setting) and the file when it does not exist or is not such a volume."""
     p = Path(path).expanduser()
     if not p.is_file():
-        raise FileNotFoundError(f"volume file {p} does not exist")
-    if quantity not in ("temperature", "n"):
-        raise ValueError(f"phantom.quantity must be 'temperature' or 'n', got '{quantity}'")
+        raise FileNotFoundError(f"{what}: volume file {p} does not exist")
     vol = _read_array(p, key).astype(np.float64)
     if vol.ndim != 3:
         raise ValueError(f"{p}: the volume must have rank 3 (nx, ny, nz), got shape {vol.shape}")
     if not np.all(np.isfinite(vol)):
         raise ValueError(f"{p}: the volume contains {int(np.sum(~np.isfinite(vol)))} NaN or infinite values")
+    return vol
+
+
+@PHANTOMS.register("file")
+def volume_file(path: str, voxel_mm: float, T0: float, n0: float, quantity: str = "temperature",
+                key: Optional[str] = None) -> Phantom:
+    """A volume (nx, ny, nz) of temperature [K] or refractive index from ``.npy/.npz/.mat/.h5`` (e.g. a DNS
+    snapshot), with its voxel size [mm] and ambient state; the box is centred on the volume."""
+    if quantity not in ("temperature", "n"):
+        raise ValueError(f"phantom.quantity must be 'temperature' or 'n', got '{quantity}'")
+    p = Path(path).expanduser()
+    vol = read_volume(path, "phantom.path", key)
     if quantity == "n":
         if vol.min() <= 1.0:
             raise ValueError(f"{p}: refractive index must exceed 1 everywhere, found {vol.min()}")

@@ -24,10 +24,12 @@ from typing import Optional
 import cv2
 import numpy as np
 
+from nerif.data.phantoms import read_volume
 from nerif.data.scene import (DATASETS, Scene, blocks_inside, dataset_folder, region_of_interest,
                               scene_from_images)
-from nerif.geometry import ProbeBox, camera_from_nerf_pose
-from nerif.physics import Ambient
+from nerif.geometry import Camera, ProbeBox, camera_from_nerf_pose
+from nerif.io.export import atomic_write, write_png
+from nerif.physics import Ambient, check_temperature
 from nerif.sensing.imaging import resample
 
 _KEYS = ("fl_x", "cx", "cy", "w", "h", "image_min", "image_max", "frames")
@@ -113,7 +115,7 @@ def optics(pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32
 def transforms(root: str, probe: dict, T0: float, n0: float, *, sigma_prior: Optional[list],
                T_max: Optional[float] = None, heldout_split: Optional[str] = "val", heldout_views: Optional[list] = None,
                binning: int = 4, pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32.0,
-               background_mm: float = 1600.0, device: str = "cpu") -> Scene:
+               background_mm: float = 1600.0, truth: Optional[str] = None, device: str = "cpu") -> Scene:
     """Train on ``transforms_train.json``; hold out ``transforms_<heldout_split>.json`` (None: no held-out views),
     or, with ``heldout_views``, those views of the training split (novel views; ``heldout_split`` must be None).
 
@@ -125,14 +127,26 @@ def transforms(root: str, probe: dict, T0: float, n0: float, *, sigma_prior: Opt
             is set); None: the field's default.
         pitch_um: pixel pitch, also the length unit of the poses. focal_mm, f_number, background_mm: lens and
             camera-to-background distance (not in the files; used only for displacements and figures).
+        truth: a volume file (.npy, .npz, .mat, .h5) of the true temperature [K] on the probe grid, when known
+            (a rendered dataset): every error against the truth is then reported; needs ``T_max``.
     """
     root = dataset_folder(root)
     if binning < 1:
         raise ValueError(f"data.binning must be at least 1, got {binning}")
     box = ProbeBox(tuple(int(n) for n in probe["shape"]), float(probe["voxel_mm"]))
     ambient = Ambient(float(T0), float(n0), None if T_max is None else float(T_max))
+    truth_T = None
+    if truth is not None:
+        if T_max is None:
+            raise ValueError("data.truth is a temperature volume: set data.T_max (the temperature of sigma = -1 "
+                             "the dataset was rendered with) to compare against it")
+        truth_T = read_volume(truth, "data.truth")
+        if truth_T.shape != box.shape:
+            raise ValueError(f"data.truth {truth} has shape {truth_T.shape}, the probe grid is {box.shape} "
+                             "(data.probe.shape)")
+        check_temperature(truth_T, f"data.truth {truth}")
     cams = optics(pitch_um, focal_mm, f_number, background_mm)
-    scene = load_views(root, "train", box, ambient, cams, binning, device,
+    scene = load_views(root, "train", box, ambient, cams, binning, device, truth_T=truth_T,
                        sigma_prior=tuple(float(x) for x in sigma_prior) if sigma_prior is not None else None)
     if heldout_views is not None:
         if heldout_split:
@@ -141,6 +155,38 @@ def transforms(root: str, probe: dict, T0: float, n0: float, *, sigma_prior: Opt
     if heldout_split:
         scene.heldout = load_views(root, heldout_split, box, ambient, cams, binning, device)
     return scene
+
+
+def write_split(root: Path, split: str, cameras: list[Camera], eps_images: list[np.ndarray],
+                mask_images: list[np.ndarray], image_range: Optional[tuple] = None) -> Path:
+    """Write views in the paper's format: ``transforms_<split>.json``, a 16-bit deflection PNG and a mask PNG per
+    view (``<split>/<k>.png``, ``<split>/<k>_mask.png``), poses in units of the cameras' pixel pitch (read them
+    back with ``data.pitch_um`` = that pitch).
+
+    Args:
+        cameras: V cameras of one size, principal point at the sensor centre.
+        eps_images: per view (H, W, 3) world-frame deflections of sigma. mask_images: per view (H, W) bool.
+        image_range: (min, max) the 16-bit images span; None: the views' own range.
+    """
+    root = Path(root)
+    lo, hi = image_range if image_range is not None else (min(float(e.min()) for e in eps_images),
+                                                          max(float(e.max()) for e in eps_images))
+    cam0 = cameras[0]
+    frames = []
+    for k, (cam, eps, mask) in enumerate(zip(cameras, eps_images, mask_images)):
+        png = np.round((np.clip(eps, lo, hi) - lo) / (hi - lo) * 65535.0).astype(np.uint16)
+        write_png(root / split / f"{k}.png", cv2.cvtColor(png, cv2.COLOR_RGB2BGR))
+        write_png(root / split / f"{k}_mask.png", np.repeat(mask[..., None].astype(np.uint16) * 65535, 3, -1))
+        c2w = np.eye(4)
+        c2w[:3, :3] = np.asarray(cam.rotation) @ np.diag([1.0, -1.0, -1.0])  # (right, down, forward) -> OpenGL
+        c2w[:3, 3] = np.asarray(cam.position) / cam.pitch_mm
+        frames.append({"file_path": f"{split}/{k}.png", "mask_file_path": f"{split}/{k}_mask.png",
+                       "transform_matrix": c2w.tolist(), "UVROI": [1, 1, cam.width, cam.height]})
+    meta = {"fl_x": cam0.image_distance_mm / cam0.pitch_mm, "cx": cam0.width / 2, "cy": cam0.height / 2,
+            "w": cam0.width, "h": cam0.height, "image_min": lo, "image_max": hi, "frames": frames}
+    path = root / f"transforms_{split}.json"
+    atomic_write(path, lambda t: Path(t).write_text(json.dumps(meta, indent=1)))
+    return path
 
 
 def reference_mask3d(root: str, box: ProbeBox, bound: float = 2.0, scale: float = 0.00054421,

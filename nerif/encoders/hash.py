@@ -46,12 +46,14 @@ class HashGrid(nn.Module):
     fit in ``2^log2_table_size`` entries (power-of-two strides, so the index is the XOR of disjoint bit
     fields), and through the spatial hash ``x ^ y * 2654435761 ^ z * 805459861`` otherwise; both are
     ``(x m0 ^ y m1 ^ z m2) mod size_l`` with per-level multipliers, exact in int32 because the primes are
-    reduced modulo the power-of-two table size. Corners are blended with smoothstep weights
-    ``w = t^2 (3 - 2 t)`` (C1, so the encoding has second derivatives and an autograd deflection loss
-    trains it); ``interpolation='linear'`` gives trilinear weights.
+    reduced modulo the power-of-two table size. Corners are blended with trilinear weights, or with smoothstep
+    weights ``w = t^2 (3 - 2 t)`` (``interpolation='smoothstep'``, the paper's: C1, so the encoding has second
+    derivatives, but flat at every grid node, so that a level alone renders a ramp as a staircase of its cell
+    size, which the finer levels must cancel; with few views the data do not pin that cancellation down and the
+    field keeps axis-aligned blocks: twice the error of trilinear weights on flame families, issue 12).
 
-    (N, 3) in [-1, 1]^3 -> (N, n_levels * n_features). Defaults: the CPU default scene's (8 levels 16 -> 96,
-    2^15 entries); the paper's are 16 levels 16 -> 512 and 2^19 entries (``+experiment=paper_phantom5``).
+    (N, 3) in [-1, 1]^3 -> (N, n_levels * n_features). Defaults: the CPU default scene's (8 levels 16 -> 64,
+    2^15 entries, trilinear); the paper's are 16 levels 16 -> 512 and 2^19 entries (``+experiment=paper_phantom5``).
     """
 
     def __init__(
@@ -60,9 +62,9 @@ class HashGrid(nn.Module):
         n_features: int = 2,
         log2_table_size: int = 15,
         base_resolution: int = 16,
-        max_resolution: int = 96,
+        max_resolution: int = 64,
         init_scale: float = 1e-4,
-        interpolation: str = "smoothstep",
+        interpolation: str = "linear",
     ):
         super().__init__()
         if interpolation not in ("smoothstep", "linear"):

@@ -18,6 +18,7 @@ log = logging.getLogger("nerif")
 FAILED = "failed.json"  # written in a job's folder when the job failed: {"error": its one-sentence message}
 
 COLUMNS = [("temperature_rmse_K", "T RMSE [K]", "{:.2f}"), ("temperature_rmse_flame_K", "T RMSE flame [K]", "{:.2f}"),
+           ("sigma_relative_error", "sigma rel. error", "{:.4f}"),
            ("deflection_rmse", "deflection RMSE [rad, or sigma]", "{:.3e}"), ("wall_time_s", "wall time [s]", "{:.1f}"),
            ("ms_per_iteration", "ms/it", "{:.1f}"), ("samples_per_second", "samples/s", "{:.3g}"),
            ("samples_per_ray_mean", "samples/ray", "{:.1f}"),

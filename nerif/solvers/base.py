@@ -158,11 +158,13 @@ class IterativeSolver:
         if self.scene.truth_T is None:
             return {}
         amb, Tt = self.scene.ambient, self.scene.truth_T
-        T = amb.temperature_from_sigma(sigma)
+        T, sigma_true = amb.temperature_from_sigma(sigma), amb.sigma_from_temperature(Tt)
         flame = flame_region(Tt, amb.T0, self.flame_threshold_K)
+        norm = float(np.sqrt(np.mean(sigma_true**2)))
         return {"temperature_rmse_K": rmse(T, Tt),
                 "temperature_rmse_flame_K": rmse(T, Tt, flame) if flame.any() else None,  # None: no flame at all
-                "sigma_rmse": rmse(sigma, amb.sigma_from_temperature(Tt))}
+                "sigma_rmse": rmse(sigma, sigma_true),
+                "sigma_relative_error": rmse(sigma, sigma_true) / norm if norm > 0 else None}  # |s - s_true| / |s_true|
 
     def saturation(self, sigma: np.ndarray) -> dict:
         """What a reconstruction ``sigma`` says about the solver's bounds, for ``metrics.json``: a bounded

@@ -12,7 +12,7 @@ import torch
 from nerif.data import Scene
 from nerif.encoders import ENCODERS
 from nerif.field import NeuralField, prior_interval
-from nerif.losses import AmbientBoundary, deflection_terms, weighted_sum
+from nerif.losses import AmbientBoundary, TotalVariation, deflection_terms, weighted_sum
 from nerif.metrics import deflection_rmse
 from nerif.renderers import SAMPLERS, render_deflections
 from nerif.renderers.samplers import UniformSampler
@@ -90,6 +90,10 @@ class NeuralSolver(IterativeSolver):
         faces = self.resolve_ambient_faces(lc["ambient_faces"], masks, lc["crossed_cover"], lc["ambient_fallback"])
         b = AmbientBoundary(scene.box, faces, lc["ambient_weight"], lc["ambient_points"])
         self.boundary = b if b.active else None
+        inside = torch.cat([pool[0] for pool in self._pools(scene, masks.inside, 0.0)])
+        rms = float(scene.eps[inside].double().norm(dim=-1).pow(2).mean().sqrt()) / scene.ambient.delta_thre
+        tv = TotalVariation(scene.box, lc["tv_weight"], lc["tv_points"], rms)
+        self.tv = tv if tv.active else None
         self.pools = self._pools(scene, masks.inside, self.outside_fraction)
         oc = self.optim_cfg
         fused = self.device.type == "cuda"
@@ -199,6 +203,9 @@ class NeuralSolver(IterativeSolver):
         boundary = self.boundary(self.field, self.generator) if self.boundary is not None else None
         if boundary is not None:
             loss = loss + boundary
+        tv = self.tv(self.field, self.generator) if self.tv is not None else None
+        if tv is not None:
+            loss = loss + tv
         if not torch.isfinite(loss):
             raise DivergenceError(f"the loss became {loss.item()} at iteration {self.iteration}: the run diverged "
                                   "(try a lower train.lr)")
@@ -219,6 +226,8 @@ class NeuralSolver(IterativeSolver):
         out.update({f"loss_{n}": t.item() for n, t in terms.items()})
         if boundary is not None:
             out["loss_boundary"] = boundary.item()
+        if tv is not None:
+            out["loss_tv"] = tv.item()
         return out
 
     # --- evaluation ---
