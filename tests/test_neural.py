@@ -177,3 +177,15 @@ def test_a_run_stops_when_its_evaluations_no_longer_improve_the_fit(tmp_path):
     assert torch.load(tmp_path / "ck.pt", weights_only=False)["iteration"] == 10 * first
     with pytest.raises(ValueError, match="train.stop_when_converged=2"):
         neural_solver("train.stop_when_converged=2")
+
+
+def test_the_field_tv_term_trains_only_when_weighted():
+    """``loss.tv_weight`` adds the field's total variation to the loss, scaled by the RMS observed deflection of
+    the rays training draws from (so that the weight is dimensionless); with weight 0 nothing is added."""
+    off = neural_solver()
+    assert off.tv is None and "loss_tv" not in off.step()
+    on = neural_solver("loss.tv_weight=0.5")
+    rms = float(on.scene.eps.norm(dim=-1).pow(2).mean().sqrt()) / on.scene.ambient.delta_thre
+    assert on.tv.scale == pytest.approx(rms, rel=1e-4)  # every ray is inside: no 2-D mask here
+    out = on.step()
+    assert out["loss_tv"] > 0 and out["loss"] > out["loss_tv"]

@@ -84,7 +84,7 @@ class TotalVariation:
         weight: dimensionless weight (0: off).
         points: random points per iteration.
         scale: ``s``, the RMS magnitude of the observed deflections (normalised units).
-        eps: smoothing of ``|grad sigma|`` near 0 [1/mm], relative to ``s`` / h.
+        eps: smoothing of the change of sigma over a voxel near 0, relative to ``s``.
     """
 
     def __init__(self, box: ProbeBox, weight: float, points: int, scale: float, eps: float = 1e-3):

@@ -90,11 +90,11 @@ class NeuralSolver(IterativeSolver):
         faces = self.resolve_ambient_faces(lc["ambient_faces"], masks, lc["crossed_cover"], lc["ambient_fallback"])
         b = AmbientBoundary(scene.box, faces, lc["ambient_weight"], lc["ambient_points"])
         self.boundary = b if b.active else None
-        inside = torch.cat([pool[0] for pool in self._pools(scene, masks.inside, 0.0)])
+        self.pools = self._pools(scene, masks.inside, self.outside_fraction)
+        inside = torch.cat([pool[0] for pool in self.pools])
         rms = float(scene.eps[inside].double().norm(dim=-1).pow(2).mean().sqrt()) / scene.ambient.delta_thre
         tv = TotalVariation(scene.box, lc["tv_weight"], lc["tv_points"], rms)
         self.tv = tv if tv.active else None
-        self.pools = self._pools(scene, masks.inside, self.outside_fraction)
         oc = self.optim_cfg
         fused = self.device.type == "cuda"
         self.optimizer = torch.optim.Adam(list(self.field.parameters()), lr=oc["lr"], betas=tuple(oc["betas"]),
