@@ -23,12 +23,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import cv2
 import numpy as np
 import torch
 
 from nerif.data.phantoms import lifted_jet_profile, phantom5_temperature
-from nerif.geometry import ProbeBox
+from nerif.data.scene import with_noise
+from nerif.data.transforms import write_split
+from nerif.geometry import ProbeBox, arc_rig, rays_in_box, view_index
+from nerif.io.export import atomic_write
 from nerif.physics import Ambient
+from nerif.renderers.deflection import perpendicular
 
 AMBIENT = Ambient(300.0, 1.00027, 2400.0)
 
@@ -238,14 +243,6 @@ def write_dataset(root, flame: Flame, noise: float = 0.0, noise_seed: int = 0, n
 
     Returns the overrides that reconstruct it: ``python -m nerif <overrides>``.
     """
-    import cv2
-
-    from nerif.data.scene import with_noise
-    from nerif.data.transforms import write_split
-    from nerif.geometry import arc_rig, rays_in_box, view_index
-    from nerif.io.export import atomic_write
-    from nerif.renderers.deflection import perpendicular
-
     root = Path(root)
     angles = {"train": list(np.linspace(0.0, span_deg, n_views)), "val": list(heldout_deg)}
     cams = {s: arc_rig(angles_deg=a, binning=binning) for s, a in angles.items()}
