@@ -62,6 +62,14 @@ def run_cells(cells: list[str], settings: list[str], out: Path, resume: bool = F
     return rows
 
 
+def time_to(history: list[dict], target: float, key: str = "temperature_rmse_K"):
+    """Training seconds at a run's first evaluation whose ``key`` is at or below ``target`` (None if never)."""
+    for h in history:
+        if h.get(key) is not None and h[key] <= target:
+            return h["wall_time_s"]
+    return None
+
+
 def write_report(out: Path, stem: str, payload: dict, text: str) -> None:
     """``<stem>.json`` (the payload) and ``<stem>.md`` (the text) in ``out``, atomically; the text printed."""
     write_json(payload, out / f"{stem}.json")

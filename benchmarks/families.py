@@ -29,7 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ablation import header, run_cells, write_report  # noqa: E402
+from ablation import header, run_cells, time_to, write_report  # noqa: E402
 
 from nerif.data.families import FAMILIES, write_dataset  # noqa: E402
 from nerif.io.export import write_json  # noqa: E402
@@ -56,14 +56,6 @@ def best_error(row: dict) -> tuple[float, float]:
     h = [e for e in row["history"] if e.get(KEY) is not None]
     e = min(h, key=lambda x: x[KEY])
     return e[KEY], e["wall_time_s"]
-
-
-def time_to(row: dict, target: float) -> float | None:
-    """Training time [s] at which a run first reached ``target`` (None: never)."""
-    for e in row["history"]:
-        if e.get(KEY) is not None and e[KEY] <= target:
-            return e["wall_time_s"]
-    return None
 
 
 def tv_sweep(name: str, settings: list[str], out: Path, resume: bool) -> dict[float, dict]:
@@ -109,7 +101,7 @@ def report(scenes: dict[str, dict]) -> str:
         data_row = s["cgls_tv"][f"{s['tv_data_lam']:g}"]
         for v, r in s["nerif"].items():
             err = r[KEY]
-            reach = time_to(r, tv_best)
+            reach = time_to(r["history"], tv_best, KEY)
             worst[v] = max(worst.get(v, 0.0), err / tv_best)
             lines.append(f"| {name} | nerif {v} | {err:.4f} | {r['temperature_rmse_K']:.2f} | {r['wall_time_s']:.0f} | "
                          f"{'never' if reach is None else f'{reach:.0f}'} | {err / tv_best:.2f} |")

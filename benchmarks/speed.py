@@ -19,7 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ablation import header, run_cells, write_report  # noqa: E402
+from ablation import header, run_cells, time_to, write_report  # noqa: E402
 
 
 VARIANTS = {
@@ -30,14 +30,6 @@ VARIANTS = {
 }
 TARGETS_K = (25.0, 20.0, 15.0)
 EVALS_PER_SAMPLE = {"discrete": 7, "auto": 1, "hybrid": 7}
-
-
-def time_to(history: list[dict], target: float):
-    """Training seconds at the first evaluation at or below ``target`` K (None if never)."""
-    for h in history:
-        if h.get("temperature_rmse_K") is not None and h["temperature_rmse_K"] <= target:
-            return h["wall_time_s"]
-    return None
 
 
 def table(rows: dict[str, dict]) -> str:

@@ -160,11 +160,11 @@ class IterativeSolver:
         amb, Tt = self.scene.ambient, self.scene.truth_T
         T, sigma_true = amb.temperature_from_sigma(sigma), amb.sigma_from_temperature(Tt)
         flame = flame_region(Tt, amb.T0, self.flame_threshold_K)
-        norm = float(np.sqrt(np.mean(sigma_true**2)))
+        norm, sigma_rmse = float(np.sqrt(np.mean(sigma_true**2))), rmse(sigma, sigma_true)
         return {"temperature_rmse_K": rmse(T, Tt),
                 "temperature_rmse_flame_K": rmse(T, Tt, flame) if flame.any() else None,  # None: no flame at all
-                "sigma_rmse": rmse(sigma, sigma_true),
-                "sigma_relative_error": rmse(sigma, sigma_true) / norm if norm > 0 else None}  # |s - s_true| / |s_true|
+                "sigma_rmse": sigma_rmse,
+                "sigma_relative_error": sigma_rmse / norm if norm > 0 else None}  # |s - s_true| / |s_true|
 
     def saturation(self, sigma: np.ndarray) -> dict:
         """What a reconstruction ``sigma`` says about the solver's bounds, for ``metrics.json``: a bounded
