@@ -66,6 +66,30 @@ class NeuralField(nn.Module):
         return out.reshape(box.shape)
 
 
+def fit_to_volume(field: NeuralField, box: ProbeBox, sigma: torch.Tensor, iterations: int, *, lr: float = 5e-3,
+                  batch: int = 8192, generator: Optional[torch.Generator] = None) -> float:
+    """Regress ``field`` onto a voxel volume (a warm start, e.g. from a fast voxel solver): Adam on the squared
+    error at ``batch`` random voxel centres per iteration, a fresh optimiser of its own.
+
+    Args:
+        sigma: (nx, ny, nz) sigma at the voxel centres of ``box``, on the field's device.
+    Returns:
+        the RMS difference over every voxel at the end (sigma units).
+    """
+    dev = sigma.device
+    centres = torch.as_tensor(box.centres().reshape(-1, 3), dtype=torch.float32, device=dev)
+    target = sigma.reshape(-1).to(torch.float32)
+    opt = torch.optim.Adam(field.parameters(), lr=lr)
+    for _ in range(iterations):
+        i = torch.randint(len(target), (batch,), device=dev, generator=generator)
+        loss = (field(centres[i]) - target[i]).square().mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+    with torch.no_grad():
+        return float((field.on_grid(box).reshape(-1) - target).square().mean().sqrt())
+
+
 DEFAULT_PRIOR = (-1.05, 0.05)  # hot gas in cooler ambient: sigma from -1 (T_max) to slightly above 0
 
 

@@ -11,7 +11,8 @@ import torch
 
 from nerif.data import Scene
 from nerif.encoders import ENCODERS
-from nerif.field import NeuralField, prior_interval
+from nerif.data.phantoms import read_volume
+from nerif.field import NeuralField, fit_to_volume, prior_interval
 from nerif.losses import AmbientBoundary, TotalVariation, deflection_terms, weighted_sum
 from nerif.metrics import deflection_rmse
 from nerif.renderers import SAMPLERS, render_deflections
@@ -23,7 +24,7 @@ log = logging.getLogger(__name__)
 
 @SOLVERS.register("nerif")
 class NeuralSolver(IterativeSolver):
-    """Adam + cosine annealing on batches of random rays drawn evenly from every view (or, as in the paper, from
+    """Adam (AdamW's decoupled decay on the encoder's tables) + cosine annealing on batches of random rays drawn evenly from every view (or, as in the paper, from
     one view per iteration, views cycled).
 
     Built from ``conf/solver/nerif.yaml``, whose groups it reads:
@@ -39,8 +40,11 @@ class NeuralSolver(IterativeSolver):
             the fixed evaluation rays over the last ``stop_patience`` evaluations improves on the best before them
             by less than this fraction; null: never),
             ``rays_per_batch``, ``views_per_batch`` (a number, or ``all``),
-            ``outside_fraction`` (share of each view's rays drawn outside its 2-D mask), and Adam's ``lr``,
-            ``betas``, ``eps`` with the cosine floor ``lr_min``.
+            ``outside_fraction`` (share of each view's rays drawn outside its 2-D mask), Adam's ``lr``,
+            ``betas``, ``eps`` with the cosine floor ``lr_min``, and ``table_decay``: each step multiplies the
+            encoder's parameters by ``1 - lr table_decay`` (AdamW), so that table entries no ray constrains fade
+            to zero instead of wandering under Adam's normalised steps. ``init_volume``: a ``reconstruction.npz``
+            on this probe grid that the field is first fit to (``init_iterations``; :func:`nerif.field.fit_to_volume`).
         metrics, seed, label: see :class:`IterativeSolver`.
     """
 
@@ -74,6 +78,10 @@ class NeuralSolver(IterativeSolver):
         self.encoder = ENCODERS.build(encoder)
         self.sampler = SAMPLERS.build(sampler)
         self.hidden, self.prior = tuple(field["hidden"]), field["prior"]
+        self.table_decay = float(train["table_decay"])
+        self.init_volume, self.init_iterations = train["init_volume"], int(train["init_iterations"])
+        if self.table_decay < 0:
+            raise ValueError(f"train.table_decay={self.table_decay}: a decay rate of at least 0")
         self.loss_cfg = dict(loss)
         self.optim_cfg = {k: train[k] for k in ("lr", "betas", "eps", "lr_min")}
         self.labels.update(encoder=encoder["name"], grad=grad["name"])
@@ -97,11 +105,16 @@ class NeuralSolver(IterativeSolver):
         self.tv = tv if tv.active else None
         oc = self.optim_cfg
         fused = self.device.type == "cuda"
-        self.optimizer = torch.optim.Adam(list(self.field.parameters()), lr=oc["lr"], betas=tuple(oc["betas"]),
-                                          eps=oc["eps"], fused=fused)
+        enc = list(self.field.encoder.parameters())
+        rest = [p for p in self.field.parameters() if all(p is not q for q in enc)]
+        groups = [{"params": rest, "weight_decay": 0.0}] + ([{"params": enc, "weight_decay": self.table_decay}]
+                                                            if enc else [])
+        self.optimizer = torch.optim.AdamW(groups, lr=oc["lr"], betas=tuple(oc["betas"]), eps=oc["eps"], fused=fused)
         self.scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(self.optimizer, T_max=self.iterations,
                                                                     eta_min=oc["lr_min"])
         self.generator = torch.Generator(self.device).manual_seed(self.seed)
+        if self.init_volume is not None:
+            self._warm_start(self.init_volume)
         # central-difference step: b_min / (2 K), K the most samples per ray
         self.step_mm = scene.box.shortest_side_mm / (2 * self.sampler.samples_per_ray)
         self.scale = scene.ambient.delta_thre  # rad per unit of sigma deflection
@@ -112,6 +125,20 @@ class NeuralSolver(IterativeSolver):
         self._eval_index = fixed_rays(scene, self.eval_rays_per_view, self.seed + 1)
         self._eval_sampler = UniformSampler(self.sampler.samples_per_ray, jitter=False)
         return self
+
+    def _warm_start(self, path: str) -> None:
+        """Fit the field to the sigma volume of ``path`` (a ``reconstruction.npz`` of any solver on this probe
+        grid, key ``sigma``) before training on rays."""
+        vol = read_volume(path, "train.init_volume", key="sigma")
+        if vol.shape != tuple(self.scene.box.shape):
+            raise ValueError(f"train.init_volume {path}: shape {vol.shape}, but the probe grid is "
+                             f"{tuple(self.scene.box.shape)}")
+        t0 = time.perf_counter()
+        rms = fit_to_volume(self.field, self.scene.box, torch.as_tensor(vol, device=self.device),
+                            self.init_iterations, generator=self.generator)
+        self.train_seconds += time.perf_counter() - t0
+        log.info("warm start: the field fits %s to %.3g (RMS sigma) after %d iterations", path, rms,
+                 self.init_iterations)
 
     def _check_truth_within(self, prior: tuple[float, float]) -> None:
         """Refuse a known truth that the field cannot represent (hotter than its prior's bound allows)."""
@@ -298,7 +325,11 @@ class NeuralSolver(IterativeSolver):
         except RuntimeError as e:
             raise ValueError("the checkpoint was made with another field configuration (encoder/field settings "
                              f"differ): {str(e).splitlines()[0]}") from None
-        self.optimizer.load_state_dict(st["optimizer"])
+        try:
+            self.optimizer.load_state_dict(st["optimizer"])
+        except ValueError as e:
+            raise ValueError("the checkpoint's optimiser state does not fit this solver (made by a nerif before "
+                             f"train.table_decay, or with another encoder): {str(e).splitlines()[0]}") from None
         self.sampler.load_state_dict(st.get("sampler", {}))
         self.scheduler.load_state_dict(st["scheduler"])
         self.generator.set_state(st["generator"].cpu() if self.device.type == "cpu" else st["generator"])
