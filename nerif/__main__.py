@@ -1,5 +1,7 @@
 """``python -m nerif [overrides]``: one reconstruction, or a multirun with ``-m``."""
 import logging
+import os
+import signal
 import sys
 from pathlib import Path
 
@@ -14,10 +16,20 @@ from nerif.io.summary import FAILED
 from nerif.solvers import DivergenceError, Interrupted
 
 
+def parallel_jobs() -> int:
+    """Jobs running at once on this machine: ``hydra.launcher.n_jobs`` under the joblib launcher (-1: one per
+    core, -2: all but one, as joblib counts), else 1 (one job at a time, or one per Slurm allocation)."""
+    launcher = HydraConfig.get().launcher
+    n = launcher.get("n_jobs") if "joblib" in str(launcher.get("_target_", "")) else None
+    if n is None:
+        return 1
+    return max(1, n if n > 0 else (os.cpu_count() or 1) + 1 + n)
+
+
 @hydra.main(version_base=None, config_path=str(config_dir()), config_name="config")
 def main(cfg: DictConfig) -> float:
     try:
-        metrics = run(cfg, HydraConfig.get().runtime.output_dir)
+        metrics = run(cfg, HydraConfig.get().runtime.output_dir, parallel_jobs())
     except (ValueError, FileNotFoundError, DivergenceError) as e:  # bad input or a diverged run: one sentence
         message = str(e.args[0] if e.args else e)
         logging.getLogger("nerif").error("%s", message)
@@ -26,7 +38,11 @@ def main(cfg: DictConfig) -> float:
             return float("nan")
         sys.exit(2)
     except Interrupted as e:  # the loop saved a checkpoint and said so in one line
-        sys.exit(143 if e.signal_name == "SIGTERM" else 130)
+        number = getattr(signal, e.signal_name)
+        launcher_handler = signal.getsignal(number)
+        if e.signal_name == "SIGUSR2" and callable(launcher_handler):  # submitit's: it requeues the job, which
+            launcher_handler(number, None)                            # resumes from this checkpoint
+        sys.exit(128 + int(number))
     return metrics.get("temperature_rmse_K", metrics["deflection_rmse"])
 
 

@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import logging
+import os
 import time
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import torch
@@ -42,12 +44,38 @@ def resolve_device(name: str) -> torch.device:
     return dev
 
 
-def run(cfg: DictConfig, out_dir: Path) -> dict:
-    """Reconstruct the configured scene into ``out_dir``; returns the final metrics."""
+def resolve_threads(setting, parallel_jobs: int = 1) -> int:
+    """CPU threads of a run: ``auto`` = torch's own count (the cores, or ``OMP_NUM_THREADS``) for a job alone,
+    the cores this process may use shared evenly by ``parallel_jobs`` jobs running at once (at least 1); or a
+    positive number; one sentence otherwise."""
+    if setting == "auto":
+        if parallel_jobs <= 1:
+            return torch.get_num_threads()
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        return max(1, cores // parallel_jobs)
+    if isinstance(setting, bool) or not isinstance(setting, int) or setting < 1:
+        raise ValueError(f"threads={setting}: auto or a number of CPU threads (at least 1)")
+    return setting
+
+
+def checkpoint_to_resume(setting, own: Path) -> Optional[Path]:
+    """The checkpoint a run continues from: ``train.resume`` when it is a path; with ``auto``, the run folder's
+    own ``checkpoint.pt`` when there is one; with null, none, except in a requeued Slurm job
+    (``SLURM_RESTART_COUNT`` above 0: a preempted or timed-out job of a multirun through submitit), which
+    continues from its own folder's checkpoint instead of starting over."""
+    if setting == "auto" or (setting is None and int(os.environ.get("SLURM_RESTART_COUNT", "0") or 0) > 0):
+        return own if own.is_file() else None
+    return Path(setting) if setting else None
+
+
+def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
+    """Reconstruct the configured scene into ``out_dir``; returns the final metrics. ``parallel_jobs``: jobs of
+    a multirun running at once on this machine (``threads=auto`` shares the cores among them)."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     check_complete(cfg)
     device = resolve_device(cfg.device)
+    torch.set_num_threads(resolve_threads(cfg.threads, parallel_jobs))
     check_writable(out_dir)
     torch.manual_seed(cfg.seed)
     # every check that can fail happens here, before any training; the solver checks its settings before any data
@@ -60,9 +88,10 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
     write_masks(masks, scene, out_dir)
     write_sensing(scene, out_dir)
     checkpoint = out_dir / "checkpoint.pt"
-    if tc.resume:
-        solver.load(Path(tc.resume))
-        log.info("resumed from %s at iteration %d", tc.resume, solver.iteration)
+    resume = checkpoint_to_resume(tc.resume, checkpoint)
+    if resume is not None:
+        solver.load(resume)
+        log.info("resumed from %s at iteration %d", resume, solver.iteration)
     setup_s = time.perf_counter() - t_start
 
     from torch.utils.tensorboard import SummaryWriter
@@ -95,7 +124,8 @@ def run(cfg: DictConfig, out_dir: Path) -> dict:
 
     metrics = write_outputs(solver, scene, out_dir, losses)
     metrics["warnings"] = rig_warnings + metrics.get("warnings", [])
-    metrics.update(setup_time_s=setup_s, device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
+    metrics.update(setup_time_s=setup_s, device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device),
+                   cpu_threads=torch.get_num_threads())
     if device.type == "cuda":
         metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
     metrics["total_time_s"] = time.perf_counter() - t_start

@@ -1,6 +1,7 @@
 """The command line as a user runs it: outputs of a run, the multirun table, clear errors on bad input."""
 import csv
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -79,6 +80,18 @@ def test_a_failed_job_is_a_row_of_the_summary_and_the_sweep_exits_non_zero(tmp_p
     assert float(good["temperature_rmse_K"]) > 0 and not good["error"]
     assert bad["error"] == "outside_fraction must be within [0, 1), got 1.5" and not bad["temperature_rmse_K"]
     assert "FAILED: outside_fraction must be within [0, 1), got 1.5" in (sweep / "summary.md").read_text()
+
+
+def test_a_multirun_through_the_joblib_launcher_shares_the_cores_and_lists_every_job(tmp_path):
+    sweep = tmp_path / "sweep"
+    r = nerif("-m", *TINY, "train.iterations=4", "seed=0,1", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2",
+              f"hydra.sweep.dir={sweep}", cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    rows = list(csv.DictReader((sweep / "summary.csv").open()))
+    assert sorted(row["config"].split(" ")[-1] for row in rows) == ["seed=0", "seed=1"]
+    cores = len(os.sched_getaffinity(0))
+    for m in sweep.glob("*/metrics.json"):
+        assert json.loads(m.read_text())["cpu_threads"] == max(1, cores // 2)
 
 
 def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
@@ -166,9 +179,11 @@ def test_the_default_scene_reaches_the_target_error(tmp_path):
     assert m["temperature_rmse_K"] < 25.0, m["temperature_rmse_K"]
 
 
-@pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+@pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130), (signal.SIGUSR2, 140)])
 def test_a_signal_saves_a_checkpoint_says_so_in_one_line_and_the_run_resumes(tmp_path, signum, code):
-    """SIGTERM (Slurm, timeout, a container stop) as Ctrl-C: a checkpoint, one warning, no traceback."""
+    """SIGTERM (Slurm preemption, timeout, a container stop) and SIGUSR2 (Slurm's time-limit warning) as Ctrl-C:
+    a checkpoint, one warning, no traceback; the run continues from it by path, and in the same folder with
+    ``train.resume=auto`` or as a requeued Slurm job (``SLURM_RESTART_COUNT``)."""
     args = [*TINY, "train.iterations=100000", "train.eval_every=100000", "train.checkpoint_every=100000",
             f"hydra.run.dir={tmp_path}"]
     p = subprocess.Popen([sys.executable, "-m", "nerif", *args], cwd=ROOT, stdout=subprocess.PIPE,
@@ -187,6 +202,14 @@ def test_a_signal_saves_a_checkpoint_says_so_in_one_line_and_the_run_resumes(tmp
               f"hydra.run.dir={tmp_path / 'resumed'}", cwd=ROOT)
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "resumed" / "metrics.json").read_text())["iterations"] == done + 5
+    if signum == signal.SIGUSR2:  # the same folder: by auto, then as a requeued job without any setting
+        r = nerif(*TINY, "train.resume=auto", f"train.iterations={done + 3}", f"hydra.run.dir={tmp_path}", cwd=ROOT)
+        assert r.returncode == 0 and f"at iteration {done}" in r.stdout + r.stderr, r.stderr
+        r = subprocess.run([sys.executable, "-m", "nerif", *TINY, f"train.iterations={done + 6}",
+                            f"hydra.run.dir={tmp_path}"], cwd=ROOT, capture_output=True, text=True, timeout=600,
+                           env={**os.environ, "SLURM_RESTART_COUNT": "1"})
+        assert r.returncode == 0 and f"at iteration {done + 3}" in r.stdout + r.stderr, r.stderr
+        assert json.loads((tmp_path / "metrics.json").read_text())["iterations"] == done + 6
 
 
 

@@ -39,28 +39,36 @@ class DivergenceError(RuntimeError):
 
 
 class Interrupted(KeyboardInterrupt):
-    """Ctrl-C or SIGTERM (Slurm, ``timeout``, a container stop) during a run: the work done so far is saved."""
+    """Ctrl-C, SIGTERM (Slurm preemption, ``timeout``, a container stop) or SIGUSR2 (Slurm's and submitit's
+    warning before the time limit) during a run: the work done so far is saved."""
 
     def __init__(self, signal_name: str = "SIGINT"):
         super().__init__(signal_name)
         self.signal_name = signal_name
 
 
+CAUGHT_SIGNALS = ("SIGTERM", "SIGUSR2")
+
+
 @contextmanager
 def sigterm_interrupts():
-    """Within the block, SIGTERM raises :class:`Interrupted` as Ctrl-C does (main thread only; restored after)."""
+    """Within the block, SIGTERM and SIGUSR2 raise :class:`Interrupted` as Ctrl-C does (main thread only; the
+    previous handlers are restored after, so that a launcher's own SIGUSR2 handler, submitit's requeue, can be
+    given the signal again once the checkpoint is saved)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def handler(signum, frame):
-        raise Interrupted("SIGTERM")
+        raise Interrupted(signal.Signals(signum).name)
 
-    previous = signal.signal(signal.SIGTERM, handler)
+    numbers = [getattr(signal, name) for name in CAUGHT_SIGNALS if hasattr(signal, name)]
+    previous = {n: signal.signal(n, handler) for n in numbers}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for n, h in previous.items():
+            signal.signal(n, h)
 
 
 def check_faces(setting, key: str = "loss.ambient_faces", auto: bool = True) -> None:
@@ -226,7 +234,7 @@ class IterativeSolver:
         """Run to ``iterations``, or until converged (a step's ``converged`` term, or :attr:`converged` set by an
         evaluation); evaluates every :attr:`eval_every` and at the end, checkpoints (atomically)
         every ``checkpoint_every`` iterations, at most ``checkpoint_every_s`` seconds apart, at the end and on
-        Ctrl-C or SIGTERM (then raises :class:`Interrupted`). An exception from ``step`` leaves the last good
+        Ctrl-C, SIGTERM or SIGUSR2 (then raises :class:`Interrupted`). An exception from ``step`` leaves the last good
         checkpoint in place."""
         from tqdm import tqdm
 
