@@ -12,7 +12,8 @@ right after this checkout's, so that speed-ups are ratios measured side by side 
 Every variant runs through ``nerif.app.run`` (:func:`benchmarks.ablation.run_cells`) with evaluations every
 ``train.eval_every=100`` iterations, so the time to a given error is read at that resolution (training time
 only: evaluations are not counted). Field evaluations per sample: 6 for ``grad=discrete`` (the central-difference
-neighbours; the value itself is never needed), 1 for ``auto`` (plus its double backward), 7 for ``hybrid``.
+neighbours; the value itself is never needed; 4 on perpendicular-only data, which need no along-ray derivative),
+1 for ``auto`` (plus its double backward), 7 for ``hybrid``.
 Writes ``speed.json`` and ``speed.md`` under ``--out``.
 """
 from __future__ import annotations

@@ -56,3 +56,29 @@ def test_gradients_are_per_millimetre_through_the_normalisation():
     slope = field.k * (1 - (field.c / field.k) ** 2) * 1e-3 / BOX.scale_mm
     assert g[0, 0].item() == pytest.approx(slope, rel=1e-9)
     assert g[0, 1:].abs().max() == 0
+
+
+def _perpendicular(g, d):
+    return g - (g * d).sum(-1, keepdim=True) * d
+
+
+def test_discrete_across_the_ray_is_the_perpendicular_part_of_the_full_gradient():
+    """With ray directions, ``discrete`` differences along two directions across each ray (4 evaluations):
+    exact, as the 6-evaluation reference is, on a quadratic field; second order on a smooth one."""
+    p = torch.rand(500, 3, dtype=torch.float64) * 16 - 8
+    d = torch.nn.functional.normalize(torch.randn(500, 3, dtype=torch.float64), dim=-1)
+    d[:3] = torch.eye(3, dtype=torch.float64)  # rays along the axes too
+    a = torch.randn(3, 3, dtype=torch.float64)
+
+    def quadratic(q):
+        return ((q @ a) * q).sum(-1) + q[:, 0] - 2 * q[:, 2]
+
+    discrete = GRADIENTS.get("discrete")
+    full = discrete(quadratic, p, create_graph=False, step_mm=0.3)
+    fast = discrete(quadratic, p, create_graph=False, step_mm=0.3, across=d)
+    torch.testing.assert_close(fast, _perpendicular(full, d), rtol=1e-10, atol=1e-10)
+    assert (fast * d).sum(-1).abs().max() < 1e-10
+    exact = _perpendicular(_smooth_gradient(p), d)
+    e1 = (discrete(_smooth, p, create_graph=False, step_mm=0.2, across=d) - exact).abs().max()
+    e2 = (discrete(_smooth, p, create_graph=False, step_mm=0.1, across=d) - exact).abs().max()
+    assert 3.5 < (e1 / e2).item() < 4.5

@@ -33,18 +33,20 @@ def render_deflections(field, samples: Samples, operators: Mapping[str, bool], s
         operators: operator name -> whether a loss is trained on it (builds the graph it needs:
             second-order for ``auto``); an untrained operator is evaluated without any parameter graph.
         step_mm: central-difference step for ``discrete``.
-        dirs: (n_rays, 3) ray directions: when given, only the measurable part :func:`perpendicular` to them.
+        dirs: (n_rays, 3) ray directions: when given, only the measurable part :func:`perpendicular` to them (the
+            operators may then skip the along-ray derivative: ``discrete`` takes 4 evaluations per sample, not 6).
     Returns:
         name -> (n_rays, 3) deflection of sigma (dimensionless; multiply by delta_thre for radians).
     """
     out = {}
     pos = samples.positions
+    across = None if dirs is None else dirs.to(pos.dtype)[samples.ray_index]
     for name, trained in operators.items():
         op = GRADIENTS.get(name)
         if trained:
-            g = op(field, pos, create_graph=True, step_mm=step_mm)
+            g = op(field, pos, create_graph=True, step_mm=step_mm, across=across)
         else:
-            g = op(field, pos, create_graph=False, step_mm=step_mm).detach()
+            g = op(field, pos, create_graph=False, step_mm=step_mm, across=across).detach()
         eps = integrate(g, samples)
         out[name] = eps if dirs is None else perpendicular(eps, dirs.to(eps.dtype))
     return out
