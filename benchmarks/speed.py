@@ -38,6 +38,7 @@ VARIANTS = {
     "one view per batch (paper)": "train.views_per_batch=1",
     "grad=auto": "grad=auto",
     "mask=3d sampler=uniform": "sampler=uniform",
+    "perpendicular-only data": "data.sensing=perpendicular",
 }
 TARGETS_K = (25.0, 20.0, 15.0)
 EVALS_PER_SAMPLE = {"discrete": 6, "auto": 1, "hybrid": 7}
