@@ -87,6 +87,7 @@ def test_no_second_order_graph_when_only_the_discrete_term_trains(monkeypatch):
     ("loss.ambient_faces=[w]", "ambient faces"),
     ("loss.ambient_faces=everywhere", "loss.ambient_faces must be auto or a list of faces"),
     ("loss.ambient_fallback=auto", "loss.ambient_fallback must be a list of faces"),
+    ("grad.stencil=diagonal", "grad.stencil must be 'axes' or 'across'"),
 ])
 def test_settings_are_checked_before_any_data(override, message):
     with pytest.raises(ValueError, match=message):
@@ -146,6 +147,10 @@ def test_only_the_measured_part_is_compared_when_the_scene_says_so():
     t.scene = replace(t.scene, perpendicular_only=True)
     measured = t.predicted_deflections(idx, ("discrete",))["discrete"]
     torch.testing.assert_close(measured, full - (full * d).sum(-1, keepdim=True) * d)
+    t.stencil = "across"  # differences across each ray only: the same measurable part, to the stencil's O(h^2)
+    across = t.predicted_deflections(idx, ("discrete",))["discrete"]
+    assert float((across * d).sum(-1).abs().max()) < 1e-6 * float(full.norm(dim=-1).max())
+    assert float((across - measured).norm(dim=-1).max()) < 0.01 * float(measured.norm(dim=-1).max())  # 0.0025
 
 
 def test_a_flame_at_the_prior_bound_is_reported_with_the_setting_to_raise():

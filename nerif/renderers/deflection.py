@@ -25,7 +25,7 @@ def perpendicular(eps: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
 
 
 def render_deflections(field, samples: Samples, operators: Mapping[str, bool], step_mm: float,
-                       dirs: Optional[torch.Tensor] = None) -> dict:
+                       dirs: Optional[torch.Tensor] = None, stencil: str = "axes") -> dict:
     """Deflections of the field along packed samples for each named gradient operator.
 
     Args:
@@ -33,14 +33,15 @@ def render_deflections(field, samples: Samples, operators: Mapping[str, bool], s
         operators: operator name -> whether a loss is trained on it (builds the graph it needs:
             second-order for ``auto``); an untrained operator is evaluated without any parameter graph.
         step_mm: central-difference step for ``discrete``.
-        dirs: (n_rays, 3) ray directions: when given, only the measurable part :func:`perpendicular` to them (the
-            operators may then skip the along-ray derivative: ``discrete`` takes 4 evaluations per sample, not 6).
+        dirs: (n_rays, 3) ray directions: when given, only the measurable part :func:`perpendicular` to them.
+        stencil: ``axes`` (central differences along x, y, z), or ``across``: with ``dirs``, along two directions
+            across each ray, skipping the along-ray derivative (4 evaluations per sample instead of 6).
     Returns:
         name -> (n_rays, 3) deflection of sigma (dimensionless; multiply by delta_thre for radians).
     """
     out = {}
     pos = samples.positions
-    across = None if dirs is None else dirs.to(pos.dtype)[samples.ray_index]
+    across = dirs.to(pos.dtype)[samples.ray_index] if dirs is not None and stencil == "across" else None
     for name, trained in operators.items():
         op = GRADIENTS.get(name)
         if trained:

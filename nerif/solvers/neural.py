@@ -32,7 +32,8 @@ class NeuralSolver(IterativeSolver):
     Args:
         encoder: an :data:`ENCODERS` config. field: ``hidden`` widths and ``prior`` interval of the MLP
             (null: the data's own, else :data:`nerif.field.DEFAULT_PRIOR`).
-        grad: ``weights``, gradient operator -> loss weight (lambda_a for ``auto``, lambda_d for ``discrete``).
+        grad: ``weights``, gradient operator -> loss weight (lambda_a for ``auto``, lambda_d for ``discrete``);
+            ``stencil`` of the central differences (see :func:`nerif.renderers.render_deflections`).
         sampler: a :data:`SAMPLERS` config. loss: the ambient boundary condition (``ambient_faces``: ``auto`` or
             a list, ``crossed_cover``, ``ambient_fallback``, ``ambient_weight``, ``ambient_points``; see
             :class:`nerif.losses.AmbientBoundary` and :meth:`IterativeSolver.resolve_ambient_faces`).
@@ -71,6 +72,9 @@ class NeuralSolver(IterativeSolver):
         if not 0.0 <= self.outside_fraction < 1.0:
             raise ValueError(f"outside_fraction must be within [0, 1), got {self.outside_fraction}")
         self.weights = {k: float(v) for k, v in grad["weights"].items()}
+        self.stencil = grad["stencil"]
+        if self.stencil not in ("axes", "across"):
+            raise ValueError(f"grad.stencil must be 'axes' or 'across', got '{self.stencil}'")
         if not any(w > 0 for w in self.weights.values()):
             raise ValueError("every gradient-loss weight is zero: nothing to train on (set grad.weights)")
         check_faces(loss["ambient_faces"])
@@ -224,7 +228,8 @@ class NeuralSolver(IterativeSolver):
         o, d, eps_obs = self.rays(self.batch())
         samples = self.sampler(self.scene.box, o, d, self.generator)
         trained = {name: True for name, w in self.weights.items() if w > 0}
-        eps = render_deflections(self.field, samples, trained, self.step_mm, dirs=self._measured(d))
+        eps = render_deflections(self.field, samples, trained, self.step_mm, dirs=self._measured(d),
+                                 stencil=self.stencil)
         terms = deflection_terms(eps, eps_obs)
         loss = weighted_sum(terms, self.weights)
         boundary = self.boundary(self.field, self.generator) if self.boundary is not None else None
@@ -272,7 +277,7 @@ class NeuralSolver(IterativeSolver):
         for i in range(0, len(d), 4096):
             s = self._eval_sampler(self.scene.box, o[i:i + 4096], d[i:i + 4096])
             eps = render_deflections(self.field, s, {n: False for n in operators}, self.step_mm,
-                                     dirs=self._measured(d[i:i + 4096]))
+                                     dirs=self._measured(d[i:i + 4096]), stencil=self.stencil)
             for n in operators:
                 out[n].append(eps[n].detach() * self.scale)
         return {n: torch.cat(v) if v else d.new_zeros(0, 3) for n, v in out.items()}
