@@ -12,7 +12,7 @@ right after this checkout's, so that speed-ups are ratios measured side by side 
 Every variant runs through ``nerif.app.run`` (:func:`benchmarks.ablation.run_cells`) with evaluations every
 ``train.eval_every=100`` iterations, so the time to a given error is read at that resolution (training time
 only: evaluations are not counted). Field evaluations per sample: 6 for ``grad=discrete`` (the central-difference
-neighbours; the value itself is never needed; 4 on perpendicular-only data, which need no along-ray derivative),
+neighbours; the value itself is never needed; 4 with ``grad.stencil=across`` on perpendicular-only data),
 1 for ``auto`` (plus its double backward), 7 for ``hybrid``.
 Writes ``speed.json`` and ``speed.md`` under ``--out``.
 """
@@ -39,6 +39,7 @@ VARIANTS = {
     "grad=auto": "grad=auto",
     "mask=3d sampler=uniform": "sampler=uniform",
     "perpendicular-only data": "data.sensing=perpendicular",
+    "perpendicular-only data, grad.stencil=across": "data.sensing=perpendicular grad.stencil=across",
 }
 TARGETS_K = (25.0, 20.0, 15.0)
 EVALS_PER_SAMPLE = {"discrete": 6, "auto": 1, "hybrid": 7}
@@ -130,7 +131,7 @@ def main(argv=None) -> dict:
                 print(f"{name} @ {ref}: {m['temperature_rmse_K']:.1f} K, {m['ms_per_iteration']:.1f} ms/it", flush=True)
     rows = {}
     for name, r in zip(names, table_rows):
-        per_sample = EVALS_PER_SAMPLE[r.get("grad", "discrete")]
+        per_sample = 4 if "stencil=across" in r["config"] else EVALS_PER_SAMPLE[r.get("grad", "discrete")]
         rows[name] = {**{k: r.get(k) for k in ("ms_per_iteration", "samples_per_second", "temperature_rmse_K",
                                                "wall_time_s", "device")},
                       "field_evaluations_per_second": per_sample * r["samples_per_second"],
