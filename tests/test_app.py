@@ -250,7 +250,7 @@ def test_help_says_what_nerif_does_and_lists_the_groups():
 def test_a_bug_keeps_its_traceback(tmp_path):
     """Only the errors raised for bad input become one sentence; a KeyError from a bug is shown in full."""
     code = ("import sys, nerif.__main__ as m\n"
-            "def broken(cfg, out):\n    return {}['missing']\n"
+            "def broken(*args):\n    return {}['missing']\n"
             f"m.run = broken\nsys.argv = ['nerif', 'device=cpu', 'hydra.run.dir={tmp_path}']\nm.main()\n")
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert r.returncode != 0

@@ -62,9 +62,9 @@ def test_no_second_order_graph_when_only_the_discrete_term_trains(monkeypatch):
     calls = []
     auto = GRADIENTS.get("auto")
 
-    def spy(field, p, *, create_graph, step_mm):
+    def spy(field, p, *, create_graph, step_mm, across=None):
         calls.append(create_graph)
-        return auto(field, p, create_graph=create_graph, step_mm=step_mm)
+        return auto(field, p, create_graph=create_graph, step_mm=step_mm, across=across)
 
     monkeypatch.setitem(GRADIENTS._entries, "auto", spy)
     tr = neural_solver("grad=discrete")
