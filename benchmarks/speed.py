@@ -118,11 +118,11 @@ def main(argv=None) -> dict:
     out = Path(args.out)
     settings = ["train.eval_every=100"] + args.set
     cells = [VARIANTS[v] or "seed=0" for v in args.variants]
-    table_rows = run_cells(cells, settings, out, resume=args.resume)
     names = list(args.variants)
     with ExitStack() as stack:
-        for ref in args.against:
-            tree = checkout(ref, stack)
+        trees = {ref: checkout(ref, stack) for ref in args.against}  # a bad ref fails before any run
+        table_rows = run_cells(cells, settings, out, resume=args.resume)
+        for ref, tree in trees.items():
             for i, (name, cell) in enumerate(zip(args.variants, cells)):
                 folder = out / f"against_{Path(ref).name or ref}_{i}"
                 m = run_elsewhere(tree, cell, settings, folder, args.resume)

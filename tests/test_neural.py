@@ -88,9 +88,11 @@ def test_no_second_order_graph_when_only_the_discrete_term_trains(monkeypatch):
     ("loss.ambient_faces=everywhere", "loss.ambient_faces must be auto or a list of faces"),
     ("loss.ambient_fallback=auto", "loss.ambient_fallback must be a list of faces"),
     ("grad.stencil=diagonal", "grad.stencil must be 'axes' or 'across'"),
+    ("train.table_decay=-1", "a decay rate of at least 0"),
+    ("train.init_volume=/nonexistent/reconstruction.npz", "volume file .* does not exist"),
 ])
 def test_settings_are_checked_before_any_data(override, message):
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises((ValueError, FileNotFoundError), match=message):
         SOLVERS.build(group(tiny_config(override), "solver"))
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+from pathlib import Path
 from typing import Mapping, Optional
 
 import numpy as np
@@ -24,8 +25,8 @@ log = logging.getLogger(__name__)
 
 @SOLVERS.register("nerif")
 class NeuralSolver(IterativeSolver):
-    """Adam (AdamW's decoupled decay on the encoder's tables) + cosine annealing on batches of random rays drawn evenly from every view (or, as in the paper, from
-    one view per iteration, views cycled).
+    """Adam (with AdamW's decoupled decay on the encoder's tables) + cosine annealing on batches of random rays
+    drawn evenly from every view (or, as in the paper, from one view per iteration, views cycled).
 
     Built from ``conf/solver/nerif.yaml``, whose groups it reads:
 
@@ -86,6 +87,8 @@ class NeuralSolver(IterativeSolver):
         self.init_volume, self.init_iterations = train["init_volume"], int(train["init_iterations"])
         if self.table_decay < 0:
             raise ValueError(f"train.table_decay={self.table_decay}: a decay rate of at least 0")
+        if self.init_volume is not None and not Path(self.init_volume).expanduser().is_file():
+            raise FileNotFoundError(f"train.init_volume: volume file {self.init_volume} does not exist")
         self.loss_cfg = dict(loss)
         self.optim_cfg = {k: train[k] for k in ("lr", "betas", "eps", "lr_min")}
         self.labels.update(encoder=encoder["name"], grad=grad["name"])
