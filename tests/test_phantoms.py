@@ -140,3 +140,17 @@ def test_turbulent_plume_is_seeded_clipped_and_has_a_minus_five_thirds_spectrum(
     E = np.array([P[(k >= lo) & (k < hi)].mean() for lo, hi in zip(bins[:-1], bins[1:])]) * kc**2
     slope = np.polyfit(np.log(kc), np.log(E), 1)[0]
     assert abs(slope + 5 / 3) < 0.15, slope
+
+
+def test_the_flickering_flame_is_the_axisymmetric_one_puffing_periodically():
+    """``phantom=flicker``: without amplitude it is the axisymmetric flame; a period later it is the same state;
+    half a period later it differs; each state stays symmetric about the axis."""
+    common = {"shape": [20, 50, 20], "voxel_mm": 2.0}
+    still = PHANTOMS.build({"name": "flicker", "amplitude": 0.0, "time_s": 0.03, **common})
+    np.testing.assert_allclose(still.T, PHANTOMS.build({"name": "axisymmetric", **common}).T, rtol=0, atol=1e-9)
+    t0 = PHANTOMS.build({"name": "flicker", "time_s": 0.01, **common}).T
+    period = PHANTOMS.build({"name": "flicker", "time_s": 0.01 + 1 / 12.0, **common}).T
+    half = PHANTOMS.build({"name": "flicker", "time_s": 0.01 + 0.5 / 12.0, **common}).T
+    np.testing.assert_allclose(period, t0, rtol=0, atol=1e-6)
+    assert np.abs(half - t0).max() > 100.0  # K: the bulges moved by half a wavelength
+    np.testing.assert_allclose(t0, t0[::-1, :, ::-1], rtol=0, atol=1e-9)

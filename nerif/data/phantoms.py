@@ -121,6 +121,26 @@ def axisymmetric(shape: Sequence[int] = (36, 50, 36), voxel_mm: float = 2.0, pro
     return Phantom(T, box, T0, n0, "axisymmetric")
 
 
+@PHANTOMS.register("flicker")
+def flicker(shape: Sequence[int] = (36, 50, 36), voxel_mm: float = 2.0, time_s: float = 0.0,
+            frequency_hz: float = 12.0, wavelength_mm: float = 40.0, amplitude: float = 0.3, T_peak: float = 1800.0,
+            lift_mm: float = -30.0, base_radius_mm: float = 12.0, flame_length_mm: float = 55.0, T0: float = 296.15,
+            n0: float = 1.00027, **lifted_jet) -> Phantom:
+    """The axisymmetric lifted flame (:func:`lifted_jet_profile`) puffing: its sheet radius modulated by a
+    varicose wave travelling up at ``frequency_hz * wavelength_mm`` [mm/s], ``1 + a(h) sin(2 pi (h / wavelength
+    - frequency t))``, whose relative amplitude ``a(h)`` grows from 0 at the flame base (height ``h = y - lift``)
+    to ``amplitude`` at its tip; a snapshot at ``time_s`` (one state of a flickering flame, periodic in
+    1 / ``frequency_hz``)."""
+    box = ProbeBox(tuple(shape), voxel_mm)
+    r, y = _cylinder_coordinates(box)
+    h = y - lift_mm
+    a = amplitude * np.clip(h / flame_length_mm, 0.0, 1.0)
+    radius = base_radius_mm * (1.0 + a * np.sin(2 * np.pi * (h / wavelength_mm - frequency_hz * time_s)))
+    T = lifted_jet_profile(r, y, T0, T_peak, lift_mm=lift_mm, base_radius_mm=radius,
+                           flame_length_mm=flame_length_mm, **lifted_jet)
+    return Phantom(T, box, T0, n0, "flicker")
+
+
 def kolmogorov_field(shape: Sequence[int], voxel_mm: float, seed: int, largest_mm: float) -> np.ndarray:
     """A zero-mean, unit-variance random field whose energy spectrum falls as k^(-5/3) (amplitude k^(-11/6) in
     3-D) below the scale ``largest_mm``; seeded."""
