@@ -21,6 +21,14 @@ def nerif(*args, cwd):
     return subprocess.run([sys.executable, "-m", "nerif", *args], cwd=cwd, capture_output=True, text=True, timeout=600)
 
 
+def multirun(tmp_path, *overrides):
+    """A sweep of the tiny scene into ``tmp_path/sweep``: the process, the folder and the summary's rows."""
+    sweep = tmp_path / "sweep"
+    r = nerif("-m", *TINY, *overrides, f"hydra.sweep.dir={sweep}", cwd=ROOT)
+    table = sweep / "summary.csv"
+    return r, sweep, list(csv.DictReader(table.open())) if table.is_file() else []
+
+
 @pytest.mark.slow
 def test_a_run_writes_every_output(tmp_path):
     out = tmp_path / "run"
@@ -56,11 +64,9 @@ def test_a_run_writes_every_output(tmp_path):
 
 @pytest.mark.slow
 def test_multirun_writes_the_summary_table(tmp_path):
-    sweep = tmp_path / "sweep"
-    r = nerif("-m", *TINY, "train.iterations=6", "train.eval_every=3", "encoder=none,hash", "grad=discrete,hybrid",
-              f"hydra.sweep.dir={sweep}", cwd=ROOT)
+    r, sweep, rows = multirun(tmp_path, "train.iterations=6", "train.eval_every=3", "encoder=none,hash",
+                              "grad=discrete,hybrid")
     assert r.returncode == 0, r.stderr[-2000:]
-    rows = list(csv.DictReader((sweep / "summary.csv").open()))
     assert len(rows) == 4
     assert {row["config"].split(" ")[-2] + " " + row["config"].split(" ")[-1] for row in rows} == {
         "encoder=none grad=discrete", "encoder=none grad=hybrid", "encoder=hash grad=discrete",
@@ -71,11 +77,10 @@ def test_multirun_writes_the_summary_table(tmp_path):
 
 
 def test_a_failed_job_is_a_row_of_the_summary_and_the_sweep_exits_non_zero(tmp_path):
-    sweep = tmp_path / "sweep"
-    r = nerif("-m", *TINY, "train.iterations=4", "train.outside_fraction=0.05,1.5", f"hydra.sweep.dir={sweep}", cwd=ROOT)
+    r, sweep, table = multirun(tmp_path, "train.iterations=4", "train.outside_fraction=0.05,1.5")
     assert r.returncode == 1
     assert "1 of 2 jobs failed" in r.stdout + r.stderr and "Traceback" not in r.stdout + r.stderr
-    rows = {row["config"].split()[-1]: row for row in csv.DictReader((sweep / "summary.csv").open())}
+    rows = {row["config"].split()[-1]: row for row in table}
     good, bad = rows["train.outside_fraction=0.05"], rows["train.outside_fraction=1.5"]
     assert float(good["temperature_rmse_K"]) > 0 and not good["error"]
     assert bad["error"] == "outside_fraction must be within [0, 1), got 1.5" and not bad["temperature_rmse_K"]
@@ -83,11 +88,9 @@ def test_a_failed_job_is_a_row_of_the_summary_and_the_sweep_exits_non_zero(tmp_p
 
 
 def test_a_multirun_through_the_joblib_launcher_shares_the_cores_and_lists_every_job(tmp_path):
-    sweep = tmp_path / "sweep"
-    r = nerif("-m", *TINY, "train.iterations=4", "seed=0,1", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2",
-              f"hydra.sweep.dir={sweep}", cwd=ROOT)
+    r, sweep, rows = multirun(tmp_path, "train.iterations=4", "seed=0,1", "hydra/launcher=joblib",
+                              "hydra.launcher.n_jobs=2")
     assert r.returncode == 0, r.stderr[-2000:]
-    rows = list(csv.DictReader((sweep / "summary.csv").open()))
     assert sorted(row["config"].split(" ")[-1] for row in rows) == ["seed=0", "seed=1"]
     cores = len(os.sched_getaffinity(0))
     for m in sweep.glob("*/metrics.json"):
@@ -95,10 +98,8 @@ def test_a_multirun_through_the_joblib_launcher_shares_the_cores_and_lists_every
 
 
 def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
-    sweep = tmp_path / "sweep"
-    r = nerif("-m", *TINY, "train.iterations=6", "solver=nerif,cgls", f"hydra.sweep.dir={sweep}", cwd=ROOT)
+    r, sweep, rows = multirun(tmp_path, "train.iterations=6", "solver=nerif,cgls")
     assert r.returncode == 0, r.stderr[-2000:]
-    rows = list(csv.DictReader((sweep / "summary.csv").open()))
     assert [row["config"].split(" ")[-1] for row in rows] == ["solver=nerif", "solver=cgls"]
     jobs = sorted(p.parent for p in sweep.glob("*/metrics.json"))
     assert [j.name for j in jobs] == ["0_hash-discrete", "1_cgls-none"]  # run folders named by solver
