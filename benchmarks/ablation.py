@@ -55,7 +55,7 @@ def run_cells(cells: list[str], settings: list[str], out: Path, resume: bool = F
             m = run(cfg, folder)
         row = {"config": cell, "total_time_s": time.perf_counter() - t0,
                **{k: m[k] for k, _, _ in COLUMNS if k in m}, "device": m["device"], "history": m["history"],
-               **{k: m[k] for k in ("encoder", "grad", "gpu_peak_memory_gib") if k in m}}
+               **{k: m[k] for k in ("encoder", "grad", "gpu_peak_memory_gib", "field_evaluations_per_sample") if k in m}}
         rows.append(row)
         print(f"[{i + 1}/{len(cells)}] {cell}: " + ", ".join(
             f"{h} {f.format(row[k])}" for k, h, f in COLUMNS if k in row), flush=True)

@@ -228,3 +228,14 @@ def test_a_warm_start_begins_near_the_volume_it_is_given(tmp_path):
     np.savez(tmp_path / "wrong.npz", sigma=truth[:-1])
     with pytest.raises(ValueError, match="shape .* but the probe grid is"):
         neural_solver(f"train.init_volume={tmp_path / 'wrong.npz'}")
+
+
+@pytest.mark.parametrize("overrides, perpendicular, expected", [
+    ((), False, 6), (("grad=auto",), False, 1), (("grad=hybrid",), False, 7),
+    (("grad.stencil=across",), False, 6), (("grad.stencil=across",), True, 4)])
+def test_the_field_evaluations_per_sample_follow_the_operators_and_the_stencil(overrides, perpendicular, expected):
+    from dataclasses import replace
+
+    tr = neural_solver(*overrides)
+    tr.scene = replace(tr.scene, perpendicular_only=perpendicular)
+    assert tr.timing()["field_evaluations_per_sample"] == expected
