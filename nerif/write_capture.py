@@ -2,6 +2,7 @@
 
     python -m nerif.write_capture PATH [config overrides]
     python -m nerif.write_capture /tmp/capture phantom=axisymmetric rig.n_cameras=8
+    python -m nerif.write_capture /tmp/sequence phantom=flicker data.frames=8   # a time series, 250 frames/s
 
 The folder is what ``python -m nerif data=capture data.root=PATH`` reads: the same loop as a real experiment.
 """
@@ -13,7 +14,10 @@ from pathlib import Path
 
 from nerif.configs import compose, group
 from nerif.data import DATASETS
-from nerif.data.capture import write_capture
+from nerif.data.capture import read_rig, write_capture
+from nerif.data.frames import frames_of
+
+log = logging.getLogger("nerif")
 
 
 def main(argv=None) -> Path:
@@ -23,10 +27,20 @@ def main(argv=None) -> Path:
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     cfg = compose(["data=synthetic", "data.sensing=realistic"] + list(args.overrides))
-    scene = DATASETS.build(group(cfg, "data"), device="cpu")
-    root = write_capture(scene, Path(args.path))
-    print(f"capture of {scene.n_views} views written to {root}; reconstruct it with: "
-          f"python -m nerif data=capture data.root={root}")
+    data = group(cfg, "data")
+    frames = frames_of(data)
+    if frames is None:
+        root = write_capture(DATASETS.build(data, device="cpu"), Path(args.path))
+    else:
+        def scenes():
+            for j, f in enumerate(frames):
+                log.info("frame %d of %d (t = %.4g s): rendering", j + 1, len(frames), f.time_s)
+                yield DATASETS.build(data, frame=f.index, device="cpu")
+
+        root = write_capture(scenes(), Path(args.path), times=[f.time_s for f in frames])
+    views = len(read_rig(root)["views"]["angles_deg"])
+    what = f"{len(frames)} frames of {views} views" if frames else f"{views} views"
+    print(f"capture of {what} written to {root}; reconstruct it with: python -m nerif data=capture data.root={root}")
     return root
 
 

@@ -101,7 +101,7 @@ def _read(path):
      ValueError, "colour image"),
     (lambda r: r.update(roi_px=[200, 0, 100, 320]), None, ValueError, "roi_px .* is not inside"),
     (lambda r: r.update(roi_px=[0, 0, 16, 16]), None, ValueError, "no pixel of roi_px .* sees the probe box"),
-    (lambda r: r.update(version=2), None, ValueError, "this nerif reads version 1"),
+    (lambda r: r.update(version=3), None, ValueError, "this nerif reads versions 1 and 2"),
     (lambda r: r["camera"].pop("pitch_um"), None, ValueError, "lacks 'pitch_um'"),
     (lambda r: r.update(temperature_range_K=[2000, 300]), None, ValueError, "two increasing positive temperatures"),
 ])
@@ -127,3 +127,90 @@ def test_one_shared_reference(written, tmp_path):
     root = _variant(written, tmp_path, share, drop)
     distorted, references = capture_files(Path(root), read_rig(Path(root)))
     assert len(distorted) == 7 and {p.name for p in references} == {"reference_00.png"}
+
+
+SERIES = [o for o in SMALL if not o.startswith("phantom")] + [
+    "phantom=flicker", "phantom.shape=[16,16,16]", "phantom.voxel_mm=2.0", "phantom.lift_mm=-14",
+    "phantom.base_radius_mm=5", "phantom.flame_length_mm=24", "phantom.thickness_mm=2", "phantom.wavelength_mm=12",
+    "phantom.amplitude=0.6", "data.frames=3", "data.frame_rate_hz=24", "data.render_supersample=1", "data.cache_dir=null"]
+
+
+@pytest.fixture(scope="module")
+def series(tmp_path_factory):
+    """A capture of 3 frames of a flickering flame at 24 frames/s (frame 1: half a period after frame 0)."""
+    from nerif.data.frames import frames_of
+
+    data = OmegaConf.to_container(tiny_config(*SERIES, synthetic=False).data, resolve=True)
+    frames = frames_of(data)
+    scenes = [DATASETS.build(data, frame=f.index) for f in frames]
+    root = write_capture(iter(scenes), tmp_path_factory.mktemp("series"), times=[f.time_s for f in frames])
+    return root, scenes
+
+
+def test_a_series_reads_back_frame_by_frame(series):
+    """Version 2: the frames listed with their times; each frame reads back as its own state: closer to the
+    thin-ray deflections of its own time than to those of the other state."""
+    from nerif.data.capture import capture_frames
+    from nerif.data.frames import Frame
+
+    root, scenes = series
+    rig = read_rig(root)
+    assert rig["version"] == 2 and "images" not in rig["views"] and len(rig["frames"]) == 3
+    assert rig["frames"][1]["images"][0] == "frame_0001/distorted_00.png"
+    assert capture_frames(str(root)) == [Frame(0, 0.0), Frame(1, pytest.approx(1 / 24)), Frame(2, pytest.approx(2 / 24))]
+    assert capture_frames(str(root), frames=[1, 2])[0].index == 1
+    n = int(scenes[0].view_start[6])
+    caps = [capture(str(root), FLOW, binning=8, frame=k) for k in range(2)]
+    truth = [s.eps[:n] for s in scenes[:2]]
+    for k in range(2):
+        own, other = ((caps[k].eps - truth[j]).norm(dim=-1).pow(2).mean().sqrt() for j in (k, 1 - k))
+        assert own < 0.7 * other, (k, float(own), float(other))
+
+
+def test_a_one_frame_capture_of_version_1_still_reads(written, tmp_path):
+    root = _variant(written, tmp_path, lambda r: r.update(version=1))
+    assert capture(root, FLOW, binning=8).n_views == 6
+
+
+def _series_variant(series, tmp_path, edit_rig=None, edit_files=None):
+    return _variant((series[0],), tmp_path, edit_rig, edit_files)
+
+
+def _drop_last(rig):
+    rig["frames"][2]["images"].pop()
+
+
+@pytest.mark.parametrize("edit_rig, edit_files, message", [
+    (None, lambda d: (d / "frame_0002" / "distorted_04.png").unlink(), "frame 2 view 4 image 'frame_0002/distorted_04.png'"),
+    (_drop_last, None, "frame 2 lists 6 images for 7 views"),
+    (None, lambda d: _write(d / "frame_0001" / "distorted_03.png", _read(d / "frame_0001" / "distorted_03.png")[8:]),
+     "distorted_03.png is 240 x 312 px but the rig's sensor_px is 240 x 320"),
+    (None, lambda d: shutil.copy(d / "frame_0001" / "distorted_03.png", d / "frame_0001" / "distorted_09.png"),
+     r"frame_0001/distorted_09.png that rig.yaml does not list"),
+    (lambda r: r["frames"][2].update(time_s=0.01), None, "frame 2 has time_s 0.01, not after frame 1's"),
+    (lambda r: r["views"].update(images=r["frames"][0]["images"]), None, "either as views.images .* not both"),
+    (lambda r: r["frames"][1].pop("time_s"), None, "frame 1 lacks 'time_s'"),
+])
+def test_bad_series_folders_are_one_sentence_before_any_flow(series, tmp_path, monkeypatch, edit_rig, edit_files,
+                                                              message):
+    """Every frame of a series is checked before the first frame's flow runs, each error naming the file."""
+    import nerif.data.capture as cap_mod
+    from nerif.data.capture import capture_frames
+
+    def no_flow(*a, **k):
+        raise AssertionError("the flow ran on a bad capture")
+
+    monkeypatch.setattr(cap_mod.FLOW, "build", no_flow)
+    with pytest.raises((ValueError, FileNotFoundError), match=message):
+        capture_frames(_series_variant(series, tmp_path, edit_rig, edit_files))
+
+
+def test_a_series_capture_reconstructs_every_frame_warm_started(series, tmp_path):
+    root = series[0]
+    cfg = tiny_config("data=capture", f"data.root={root}", "data.binning=8", "train.iterations=40",
+                      "sequence.iterations=10", synthetic=False)
+    m = run(cfg, tmp_path)
+    assert [(r["frame"], r["warm_start"], r["iterations"]) for r in m["frames"]] == [(0, False, 40), (1, True, 10),
+                                                                                   (2, True, 10)]
+    assert all(r["heldout_displacement_rmse_px"] > 0 for r in m["frames"]) and m["temperature_rmse_K"] is None  # no truth
+    assert (tmp_path / "sequence.pvd").read_text().count("reconstruction.vti") == 3

@@ -46,3 +46,14 @@ def test_written_files_get_the_usual_permissions_not_the_temporary_files_private
     finally:
         os.umask(old)
     assert stat.S_IMODE(p.stat().st_mode) == 0o644 and p.read_text() == "x"
+
+
+def test_pvd_lists_each_dataset_with_its_time(tmp_path):
+    from nerif.io.export import write_pvd
+
+    path = write_pvd(tmp_path / "s.pvd", [(0.0, "frame_0000/reconstruction.vti"), (0.004, "frame_0001/reconstruction.vti")])
+    root = ET.parse(path).getroot()
+    assert root.get("type") == "Collection"
+    sets = root.find("Collection").findall("DataSet")
+    assert [(float(d.get("timestep")), d.get("file")) for d in sets] == [
+        (0.0, "frame_0000/reconstruction.vti"), (0.004, "frame_0001/reconstruction.vti")]

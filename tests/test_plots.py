@@ -43,3 +43,15 @@ def test_curves_heldout_and_sensing_figures_render(tmp_path):
     fig = sensing_figure(rec, 1, crop_px=16)
     assert fig.axes[0].images[0].get_array().shape == (16, 16)
     assert cv2.imread(str(save_figure(fig, tmp_path / "s.png"))) is not None
+
+
+def test_the_sequence_figure_shows_every_frame_s_central_slice_over_its_truth():
+    from nerif.io.plots import sequence_figure
+
+    vols = [np.full(BOX.shape, 300.0 + 100 * k) for k in range(3)]
+    fig = sequence_figure([(f"frame {k}", v, v + 5.0) for k, v in enumerate(vols)], BOX)
+    panels = [a for a in fig.axes if a.images]
+    assert len(panels) == 6 and [a.get_title() for a in panels[:3]] == ["frame 0", "frame 1", "frame 2"]
+    np.testing.assert_array_equal(panels[1].images[0].get_array(), vols[1][:, :, 2].T)
+    np.testing.assert_array_equal(panels[4].images[0].get_array(), vols[1][:, :, 2].T + 5.0)  # its truth, below
+    assert len([a for a in sequence_figure([("a", vols[0], None)], BOX).axes if a.images]) == 1  # no truth: one row

@@ -29,3 +29,22 @@ def test_the_rig_file_describes_the_cameras_that_took_the_images(tmp_path, capsy
 
     img = cv2.imread(str(distorted[0]), cv2.IMREAD_UNCHANGED)
     assert img.shape == (320, 240) and img.dtype == np.uint8 and img.std() > 30
+
+
+def test_a_time_series_is_written_frame_by_frame(tmp_path, capsys):
+    """``data.frames=2`` of a phantom that changes in time: one folder of images per frame, the rig file listing
+    each with its time, one reference per view for all."""
+    over = [o for o in SMALL if not o.startswith("phantom")] + [
+        "phantom=flicker", "phantom.shape=[16,16,16]", "phantom.voxel_mm=2.0", "data.frames=2", "data.frame_rate_hz=24"]
+    root = main([str(tmp_path / "series"), *over])
+    assert "capture of 2 frames of 3 views" in capsys.readouterr().out
+    rig = read_rig(root)
+    assert [f["time_s"] for f in rig["frames"]] == pytest.approx([0.0, 1 / 24])
+    assert rig["frames"][1]["images"] == [f"frame_0001/distorted_{v:02d}.png" for v in range(3)]
+    d0, refs = capture_files(root, rig, 0)
+    d1, refs1 = capture_files(root, rig, 1)
+    assert refs == refs1 and all(p.is_file() for p in d0 + d1)
+    import cv2
+
+    a, b = (cv2.imread(str(d[0]), cv2.IMREAD_UNCHANGED).astype(float) for d in (d0, d1))
+    assert np.abs(a - b).max() > 0  # the flame moved between the frames

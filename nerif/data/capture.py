@@ -1,15 +1,16 @@
 """BOS captures as an experimentalist records them: a folder of background images and a rig file.
 
-Folder layout (``rig.yaml`` format version 1)::
+Folder layout (``rig.yaml`` format version 2; version 1, the same without ``frames``, is read as well)::
 
     rig.yaml                 # the rig, below
     distorted_00.png ...     # one image per view, through the flow (8- or 16-bit greyscale, all alike)
     reference_00.png ...     # the background without flow: one per view, or one shared file
+    frame_0000/distorted_00.png ...   # a time series instead: one image per view and frame (``frames`` below)
 
 ``rig.yaml``::
 
     format: nerif-capture
-    version: 1
+    version: 2
     camera:
       focal_mm: 105.0                  # lens focal length
       pitch_um: 20.0                   # pixel pitch
@@ -20,8 +21,12 @@ Folder layout (``rig.yaml`` format version 1)::
     views:
       angles_deg: [0.0, 15.0, ...]     # camera position around the burner axis (y), from +z towards +x;
                                        # a rotating burner turned by +a is a camera at -a
-      images: [distorted_00.png, ...]  # one per angle
-      references: reference.png        # one shared file, or a list (one per view)
+      images: [distorted_00.png, ...]  # one per angle (one steady state), or instead:
+      references: reference.png        # one shared file, or a list (one per view), for every frame
+    frames:                            # a time series (instead of views.images): one entry per frame, in time order
+      - time_s: 0.0
+        images: [frame_0000/distorted_00.png, ...]   # one per angle, all taken at time_s
+      - ...
     roi_px: [0, 0, 720, 1280]          # region of interest: x, y (0-based, top left), width, height [px]
     probe:                             # reconstruction grid, centred on the burner axis at the camera height
       shape: [36, 50, 36]              # nx, ny, nz (y vertical)
@@ -34,7 +39,8 @@ Folder layout (``rig.yaml`` format version 1)::
 
 The pipeline per view: optical flow between distorted and reference image (``flow`` config), block means to
 the processing grid (``binning``), displacement -> deflection through the rig geometry, rays inside the ROI that
-cross the probe box. Everything that can be wrong with the folder is checked before the flow runs.
+cross the probe box. Everything that can be wrong with the folder is checked before the flow runs, for every
+frame of a time series before the first frame's flow.
 """
 from __future__ import annotations
 
@@ -47,6 +53,7 @@ import numpy as np
 import torch
 import yaml
 
+from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.scene import (DATASETS, Scene, blocks_inside, dataset_folder, heldout_views, region_of_interest,
                               scene_from_images)
 from nerif.geometry import ProbeBox, arc_rig, rays_in_box
@@ -59,7 +66,8 @@ from nerif.sensing.optics import probe_distance_mm
 
 log = logging.getLogger(__name__)
 RIG_FILE = "rig.yaml"
-RIG_VERSION = 1
+RIG_VERSION = 2
+READ_VERSIONS = (1, 2)
 IMAGE_SUFFIXES = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
 _DEPTHS = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
 
@@ -71,29 +79,57 @@ def _need(d: dict, key: str, where: str):
 
 
 def read_rig(root: Path) -> dict:
-    """``rig.yaml`` of a capture folder, checked: format, version, required keys, view lists."""
+    """``rig.yaml`` of a capture folder, checked: format, version, required keys, view and frame lists."""
     path = root / RIG_FILE
     if not path.is_file():
         raise FileNotFoundError(f"{path} does not exist: a capture folder needs a {RIG_FILE} beside its images")
     rig = yaml.safe_load(path.read_text())
     if not isinstance(rig, dict) or rig.get("format") != "nerif-capture":
         raise ValueError(f"{path} is not a nerif capture rig file (it needs 'format: nerif-capture')")
-    if rig.get("version") != RIG_VERSION:
-        raise ValueError(f"{path} has version {rig.get('version')}; this nerif reads version {RIG_VERSION}")
+    if rig.get("version") not in READ_VERSIONS:
+        raise ValueError(f"{path} has version {rig.get('version')}; this nerif reads versions "
+                         f"{' and '.join(str(v) for v in READ_VERSIONS)}")
     cam, views = _need(rig, "camera", str(path)), _need(rig, "views", str(path))
     for k in ("focal_mm", "pitch_um", "sensor_px", "f_number", "camera_to_centre_mm", "camera_to_background_mm"):
         _need(cam, k, f"{path} camera")
-    angles, images = _need(views, "angles_deg", f"{path} views"), _need(views, "images", f"{path} views")
+    angles = _need(views, "angles_deg", f"{path} views")
     refs = _need(views, "references", f"{path} views")
-    if len(angles) != len(images):
-        raise ValueError(f"{path}: views.angles_deg has {len(angles)} angles but views.images lists {len(images)} "
-                         "images; give one angle per image")
-    if isinstance(refs, list) and len(refs) != len(images):
-        raise ValueError(f"{path}: views.references lists {len(refs)} files for {len(images)} images; give one "
-                         "per image or a single shared file")
+    rig_frames(rig, path)
+    if isinstance(refs, list) and len(refs) != len(angles):
+        raise ValueError(f"{path}: views.references lists {len(refs)} files for {len(angles)} views; give one "
+                         "per view or a single shared file")
     for k in ("roi_px", "probe", "ambient"):
         _need(rig, k, str(path))
     return rig
+
+
+def rig_frames(rig: dict, path: Path = Path(RIG_FILE)) -> list[dict]:
+    """The frames of a rig file, each ``{"time_s", "images"}`` with one image per view: its ``frames`` list
+    (version 2), or its ``views.images`` as one frame at time 0; checked."""
+    views, n = rig["views"], len(rig["views"]["angles_deg"])
+    if ("frames" in rig) == ("images" in views) or (rig.get("version") == 1 and "frames" in rig):
+        raise ValueError(f"{path}: give the images either as views.images (one steady state) or as a frames list "
+                         f"(a time series, version 2), {'not both' if 'frames' in rig else 'one of them'}")
+    if "images" in views:
+        images = _need(views, "images", f"{path} views")
+        if len(images) != n:
+            raise ValueError(f"{path}: views.angles_deg has {n} angles but views.images lists {len(images)} "
+                             "images; give one angle per image")
+        return [{"time_s": 0.0, "images": images}]
+    frames = rig["frames"]
+    if not isinstance(frames, list) or not frames:
+        raise ValueError(f"{path}: frames must be a list of frames, each with its time_s and images")
+    for k, fr in enumerate(frames):
+        images = _need(fr, "images", f"{path} frame {k}")
+        _need(fr, "time_s", f"{path} frame {k}")
+        if not isinstance(images, list) or len(images) != n:
+            got = len(images) if isinstance(images, list) else "no list of"
+            raise ValueError(f"{path}: frame {k} lists {got} images for {n} views (views.angles_deg): every frame "
+                             "needs one image per view, in the order of the angles")
+        if k and not float(fr["time_s"]) > float(frames[k - 1]["time_s"]):
+            raise ValueError(f"{path}: frame {k} has time_s {fr['time_s']}, not after frame {k - 1}'s "
+                             f"{frames[k - 1]['time_s']}: list the frames in time order")
+    return [{"time_s": float(fr["time_s"]), "images": fr["images"]} for fr in frames]
 
 
 def read_grey(path: Path) -> np.ndarray:
@@ -110,21 +146,26 @@ def read_grey(path: Path) -> np.ndarray:
     return img
 
 
-def capture_files(root: Path, rig: dict) -> tuple[list[Path], list[Path]]:
-    """The distorted and reference image of every view; raises for a missing file or an unlisted image."""
-    views = rig["views"]
-    refs = views["references"] if isinstance(views["references"], list) else [views["references"]] * len(views["images"])
-    distorted, references = [root / f for f in views["images"]], [root / f for f in refs]
+def capture_files(root: Path, rig: dict, frame: int = 0) -> tuple[list[Path], list[Path]]:
+    """The distorted and reference image of every view of ``frame``; raises for a missing file or an image the
+    rig file does not list (in the folder or in a folder of its frames)."""
+    views, frames = rig["views"], rig_frames(rig)
+    n = len(views["angles_deg"])
+    refs = views["references"] if isinstance(views["references"], list) else [views["references"]] * n
+    distorted, references = [root / f for f in frames[frame]["images"]], [root / f for f in refs]
+    where = f"frame {frame} " if len(frames) > 1 else ""
     for k, p in enumerate(distorted + references):
         if not p.is_file():
-            kind = f"view {k} image" if k < len(distorted) else f"view {k - len(distorted)} reference"
-            raise FileNotFoundError(f"{root / RIG_FILE} lists {kind} '{p.name}', which does not exist in {root}: "
-                                    "add the file or remove the view")
-    listed = {p.resolve() for p in distorted + references}
-    extra = sorted(p.name for p in root.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.resolve() not in listed)
+            kind = f"{where}view {k} image" if k < n else f"view {k - n} reference"
+            raise FileNotFoundError(f"{root / RIG_FILE} lists {kind} '{p.relative_to(root)}', which does not exist "
+                                    f"in {root}: add the file or remove the {'frame' if where and k < n else 'view'}")
+    listed = {(root / f).resolve() for fr in frames for f in fr["images"]} | {p.resolve() for p in references}
+    folders = {p.parent for p in listed} | {root.resolve()}
+    extra = sorted(str(p.relative_to(root.resolve())) for d in folders for p in d.iterdir()
+                   if p.suffix.lower() in IMAGE_SUFFIXES and p.resolve() not in listed)
     if extra:
         raise ValueError(f"{root} holds image(s) {', '.join(extra)} that {RIG_FILE} does not list: add each to "
-                         "views (with its angle) or move it out of the folder")
+                         "views (with its angle) or to its frame, or move it out of the folder")
     return distorted, references
 
 
@@ -181,19 +222,44 @@ def sigma_prior(rig: dict, ambient: Ambient, root: Path) -> Optional[tuple]:
     return min(s_hot, 0.0) - 0.05, max(s_cold, 0.0) + 0.05
 
 
+@FRAMES.register("capture")
+def capture_frames(root: str, frames=None, **_) -> Optional[list[Frame]]:
+    """``data.frames`` of a capture folder: None for a folder of one frame (unless frames are asked for), else
+    every frame (null) or those picked; every picked frame's files are checked (present, listed, readable, of
+    the sensor's size and one bit depth) before any flow runs."""
+    root = dataset_folder(root)
+    rig = read_rig(root)
+    listed = rig_frames(rig, root / RIG_FILE)
+    if frames is None and len(listed) == 1:
+        return None
+    picked = pick_frames(frames, len(listed))
+    distorted, references = [], []
+    for k in picked:
+        d, references = capture_files(root, rig, k)
+        distorted += d
+    read_images(distorted + references, rig["camera"]["sensor_px"])
+    return [Frame(k, listed[k]["time_s"]) for k in picked]
+
+
 @DATASETS.register("capture")
-def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = None, device: str = "cpu") -> Scene:
+def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = None, frames=None,
+            frame: Optional[int] = None, device: str = "cpu") -> Scene:
     """A capture folder -> scene of the training views, with the held-out views as ``scene.heldout``.
 
     Args:
         root: the capture folder. flow: a :data:`nerif.sensing.flow.FLOW` config.
         binning: b x b sensor pixels averaged into one ray (the processing grid).
         heldout: views never trained on (overrides the rig file's ``heldout``; default: the last view).
+        frames: the frames of a time series (:func:`capture_frames`); ``frame``: the one to build (None: the
+            first of the folder).
     """
     root = dataset_folder(root)
     rig = read_rig(root)
     FLOW.get(flow["name"])
-    distorted, references = capture_files(root, rig)
+    frame = 0 if frame is None else int(frame)
+    if not 0 <= frame < len(rig_frames(rig)):
+        raise ValueError(f"frame {frame}: {root / RIG_FILE} lists {len(rig_frames(rig))} frame(s)")
+    distorted, references = capture_files(root, rig, frame)
     full, cameras = rig_cameras(rig, binning)
     valid = roi_mask(rig, root, binning)
     box = ProbeBox(tuple(int(n) for n in _need(rig["probe"], "shape", "rig probe")),
@@ -226,36 +292,51 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
     return scene.split_views(held)
 
 
-def write_capture(scene: Scene, root: Path, heldout: Optional[list] = None) -> Path:
-    """Write a synthetic scene sensed realistically as a capture folder (8-bit images and ``rig.yaml``).
+def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Optional[list] = None) -> Path:
+    """Write synthetic scenes sensed realistically as a capture folder (8-bit images and ``rig.yaml``).
 
     Args:
-        scene: a scene from :func:`nerif.data.scene.synthetic` with ``sensing=realistic`` (its images); the rig
-            file describes its cameras.
+        scenes: a scene from :func:`nerif.data.scene.synthetic` with ``sensing=realistic`` (its images), or an
+            iterable of such scenes of one rig, the frames of a time series at ``times`` [s] (each is written
+            as it comes, to ``frame_KKKK/``); the rig file describes the first scene's cameras.
+        heldout: views never trained on (default: the last).
     """
-    if scene.sensing is None or "distorted" not in scene.sensing:
-        raise ValueError("writing a capture needs images: use data.sensing=realistic")
     root = Path(root)
-    ref, dist = scene.sensing["reference"], scene.sensing["distorted"]
-    n, H, W = dist.shape
-    cam = scene.cameras[0].unbinned(scene.cameras[0].binning)  # the full sensor
-    angles = [round(float(np.degrees(np.arctan2(c.position[0], c.position[2]))), 6) for c in scene.cameras]
-    images, refs = [f"distorted_{v:02d}.png" for v in range(n)], [f"reference_{v:02d}.png" for v in range(n)]
-    for v in range(n):
-        write_png(root / images[v], dist[v])
-        write_png(root / refs[v], ref[v])
+    series = times is not None
+    scenes = [scenes] if isinstance(scenes, Scene) else scenes
+    listed, first = [], None
+    for k, scene in enumerate(scenes):
+        if scene.sensing is None or "distorted" not in scene.sensing:
+            raise ValueError("writing a capture needs images: use data.sensing=realistic")
+        dist = scene.sensing["distorted"]
+        folder = f"frame_{k:04d}/" if series else ""
+        listed.append([f"{folder}distorted_{v:02d}.png" for v in range(len(dist))])
+        for v, name in enumerate(listed[-1]):
+            write_png(root / name, dist[v])
+        if first is None:
+            first = scene
+            for v, ref in enumerate(scene.sensing["reference"]):
+                write_png(root / f"reference_{v:02d}.png", ref)
+    if first is None or (series and len(listed) != len(times)) or (not series and len(listed) != 1):
+        raise ValueError(f"{len(listed)} scene(s) for {len(times) if series else 1} frame(s)")
+    n, H, W = first.sensing["distorted"].shape
+    cam = first.cameras[0].unbinned(first.cameras[0].binning)  # the full sensor
+    angles = [round(float(np.degrees(np.arctan2(c.position[0], c.position[2]))), 6) for c in first.cameras]
+    views = {"angles_deg": angles, "references": [f"reference_{v:02d}.png" for v in range(n)]}
     rig = {"format": "nerif-capture", "version": RIG_VERSION,
            "camera": {"focal_mm": float(cam.focal_mm), "pitch_um": round(cam.pitch_mm * 1e3 * cam.width / W, 9),
                       "sensor_px": [W, H], "f_number": float(cam.f_number),
                       "camera_to_centre_mm": round(probe_distance_mm(cam), 9),
                       "camera_to_background_mm": float(cam.background_mm)},
-           "views": {"angles_deg": angles, "images": images, "references": refs},
-           "roi_px": [0, 0, W, H],
-           "probe": {"shape": [int(s) for s in scene.box.shape], "voxel_mm": float(scene.box.voxel_mm)},
-           "ambient": {"T0": float(scene.ambient.T0), "n0": float(scene.ambient.n0)},
-           "T_max": float(scene.ambient.T_max),
-           "temperature_range_K": [float(scene.ambient.T0), float(scene.ambient.T_max)],
-           "heldout": list(heldout) if heldout is not None else [n - 1]}
+           "views": views if series else {**views, "images": listed[0]}}
+    if series:
+        rig["frames"] = [{"time_s": float(t), "images": images} for t, images in zip(times, listed)]
+    rig.update({"roi_px": [0, 0, W, H],
+                "probe": {"shape": [int(s) for s in first.box.shape], "voxel_mm": float(first.box.voxel_mm)},
+                "ambient": {"T0": float(first.ambient.T0), "n0": float(first.ambient.n0)},
+                "T_max": float(first.ambient.T_max),
+                "temperature_range_K": [float(first.ambient.T0), float(first.ambient.T_max)],
+                "heldout": list(heldout) if heldout is not None else [n - 1]})
     atomic_write(root / RIG_FILE, lambda t: Path(t).write_text(
         "# nerif capture rig file (format: nerif/data/capture.py); written from a synthetic scene\n"
         + yaml.safe_dump(rig, sort_keys=False, default_flow_style=None)))

@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from nerif.cache import cached_arrays, content_digest
+from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.phantoms import PHANTOMS
 from nerif.geometry import RIGS, Camera, ProbeBox, rays_in_box, view_index
 from nerif.physics import Ambient
@@ -213,10 +214,25 @@ def keep_rays(dirs, eps, pixel, view_start, keep: torch.Tensor):
     return dirs[keep], eps[keep], pixel[keep], starts
 
 
+@FRAMES.register("synthetic")
+def synthetic_frames(phantom: dict, frames=None, frame_rate_hz: float = 250.0, **_) -> Optional[list[Frame]]:
+    """``data.frames`` of a synthetic scene: None (one steady scene), else that many frames (or those listed) of
+    the phantom, ``1 / frame_rate_hz`` apart from its own ``time_s``; the phantom must change in time."""
+    if frames is None:
+        return None
+    if "time_s" not in phantom:
+        raise ValueError(f"data.frames={frames}: phantom '{phantom['name']}' does not change in time; a sequence needs "
+                         "one that does, such as phantom=flicker")
+    if not frame_rate_hz > 0:
+        raise ValueError(f"data.frame_rate_hz={frame_rate_hz}: a positive number of frames per second")
+    return [Frame(k, float(phantom["time_s"]) + k / float(frame_rate_hz)) for k in pick_frames(frames)]
+
+
 @DATASETS.register("synthetic", hints={"binning": "rig.binning"})
 def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", sensor: Optional[dict] = None,
               render_supersample: int = 4, render_step_mm: Optional[float] = None, cache_dir: Optional[str] = None,
-              deflection_noise: float = 0.0, noise_seed: int = 0, device: str = "cpu") -> Scene:
+              deflection_noise: float = 0.0, noise_seed: int = 0, frames=None, frame_rate_hz: float = 250.0,
+              frame: Optional[int] = None, device: str = "cpu") -> Scene:
     """A phantom seen by a synthetic rig; observations from the voxel forward model.
 
     Args:
@@ -233,8 +249,13 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
         deflection_noise: Gaussian noise added to the observed deflections, as a fraction of their RMS magnitude
             (the RMS magnitude of the noise vectors; perpendicular to each ray where only that part is measured),
             drawn with ``noise_seed``.
+        frames, frame_rate_hz: the frames of a sequence (:func:`synthetic_frames`); ``frame``: the one to build,
+            the phantom at its ``time_s + frame / frame_rate_hz`` (None: at its own ``time_s``).
     """
-    SENSING.get(sensing)  # an unknown name fails here, before any rendering
+    SENSING.get(sensing)
+    if frame is not None:
+        t = synthetic_frames(phantom, [int(frame)], frame_rate_hz)[0].time_s
+        phantom = dict(phantom, time_s=t)  # an unknown name fails here, before any rendering
     if not 0.0 <= deflection_noise < 10.0:
         raise ValueError(f"data.deflection_noise={deflection_noise}: a fraction of the RMS deflection, within [0, 10)")
     sensor = dict(sensor or {}) if sensing == "realistic" else {}  # the only sensing with parameters

@@ -100,3 +100,12 @@ def write_png(path: Path, image: np.ndarray) -> Path:
     if not ok:
         raise ValueError(f"could not encode {path} as PNG (dtype {image.dtype}, shape {image.shape})")
     return atomic_write(Path(path), lambda t: Path(t).write_bytes(png.tobytes()))
+
+
+def write_pvd(path: Path, datasets: list[tuple[float, str]]) -> Path:
+    """A ParaView collection (``.pvd``): one animated dataset of ``(time [s], file)`` pairs, each file a path
+    relative to the ``.pvd``'s folder (a frame's ``.vti``)."""
+    rows = "\n".join(f'    <DataSet timestep="{float(t)!r}" part="0" file="{Path(f).as_posix()}"/>' for t, f in datasets)
+    text = ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
+            f"  <Collection>\n{rows}\n  </Collection>\n</VTKFile>\n")
+    return atomic_write(path, lambda tmp: Path(tmp).write_text(text))

@@ -48,6 +48,33 @@ def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = No
     return fig
 
 
+def sequence_figure(frames: list[tuple[str, np.ndarray, Optional[np.ndarray]]], box: ProbeBox, unit: str = "K",
+                    title: str = ""):
+    """The central vertical slice (x-y at z = 0) of every frame of a time series side by side, over the truth
+    where known, on one colour scale. ``frames``: (label, volume, true volume or None) per frame."""
+    truth = [t for _, _, t in frames if t is not None]
+    rows = [("reconstruction", [v for _, v, _ in frames])] + ([("truth", truth)] if len(truth) == len(frames) else [])
+    every = [v for _, vols in rows for v in vols]
+    vmin, vmax = float(min(v.min() for v in every)), float(max(v.max() for v in every))
+    ax_x, ax_y, _ = box.axes()
+    h, iz = box.voxel_mm / 2, box.shape[2] // 2
+    ext = [ax_x[0] - h, ax_x[-1] + h, ax_y[0] - h, ax_y[-1] + h]
+    fig, axes = plt.subplots(len(rows), len(frames), figsize=(1.9 * len(frames) + 1.2, 3.0 * len(rows) + 0.6),
+                             squeeze=False)
+    for i, (name, vols) in enumerate(rows):
+        for j, vol in enumerate(vols):
+            ax = axes[i, j]
+            im = ax.imshow(vol[:, :, iz].T, origin="lower", extent=ext, cmap="inferno", vmin=vmin, vmax=vmax)
+            ax.set_title(f"{frames[j][0]}" if i == 0 else "", fontsize=8)
+            ax.set_xticks([])
+            ax.set_yticks([])
+        axes[i, 0].set_ylabel(f"{name}\nx-y at z = 0", fontsize=8)
+    fig.colorbar(im, ax=axes.ravel().tolist(), fraction=0.02, label=unit)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
 def save_figure(fig, path: Path) -> Path:
     path = atomic_write(Path(path), lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     plt.close(fig)

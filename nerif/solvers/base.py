@@ -102,6 +102,7 @@ class IterativeSolver:
     """
 
     name = "solver"
+    starts_from_previous = False  # whether :meth:`start_from` can begin a frame from the previous frame's state
 
     def __init__(self, *, iterations: int, eval_every: int, metrics: Mapping, seed: int, label: str):
         if iterations < 1:
@@ -226,6 +227,13 @@ class IterativeSolver:
         if not path.is_file():
             raise FileNotFoundError(f"checkpoint {path} does not exist")
         self.load_state_dict(torch.load(path, map_location=self.device, weights_only=False))
+
+    def start_from(self, path: Path) -> None:
+        """Start from the final state of another run on data of the same rig and probe box (the previous frame
+        of a sequence): what the solver learnt, with fresh optimisation state and counters. Solvers that can
+        override it and set :attr:`starts_from_previous`; here one sentence."""
+        raise ValueError(f"solver={self.name} cannot start a frame from the previous one: use "
+                         "sequence.warm_start=false")
 
     # --- loop ---
     def fit(self, *, checkpoint_every: int, checkpoint: Optional[Path] = None,

@@ -51,6 +51,7 @@ class NeuralSolver(IterativeSolver):
     """
 
     name = "nerif"
+    starts_from_previous = True
 
     def __init__(self, *, encoder: Mapping, field: Mapping, grad: Mapping, sampler: Mapping, loss: Mapping,
                  train: Mapping, metrics: Mapping, seed: int, label: str):
@@ -335,18 +336,29 @@ class NeuralSolver(IterativeSolver):
                 "generator": self.generator.get_state(), "samples_seen": self.samples_seen, "rays_seen": self.rays_seen,
                 "samples_max": self.samples_max, "rays_skipped": self.rays_skipped, "converged": self.converged}
 
-    def load_state_dict(self, st: dict) -> None:
+    def _load_field(self, st: dict) -> None:
         try:
             self.field.load_state_dict(st["field"])
         except RuntimeError as e:
             raise ValueError("the checkpoint was made with another field configuration (encoder/field settings "
                              f"differ): {str(e).splitlines()[0]}") from None
+        self.sampler.load_state_dict(st.get("sampler", {}))
+
+    def start_from(self, path: Path) -> None:
+        """The field's weights and the occupancy grid of ``path`` (a checkpoint of the previous frame); the
+        optimiser, its schedule and the counters start afresh. The 3-D mask stays this frame's own."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"the previous frame's checkpoint {path} does not exist")
+        self._load_field(torch.load(path, map_location=self.device, weights_only=False))
+
+    def load_state_dict(self, st: dict) -> None:
+        self._load_field(st)
         try:
             self.optimizer.load_state_dict(st["optimizer"])
         except ValueError as e:
             raise ValueError("the checkpoint's optimiser state does not fit this solver (made by a nerif before "
                              f"train.table_decay, or with another encoder): {str(e).splitlines()[0]}") from None
-        self.sampler.load_state_dict(st.get("sampler", {}))
         self.scheduler.load_state_dict(st["scheduler"])
         self.generator.set_state(st["generator"].cpu() if self.device.type == "cpu" else st["generator"])
         super().load_state_dict(st)
