@@ -45,3 +45,13 @@ def test_a_steady_phantom_has_no_frames():
     data = group(tiny_config("data.frames=4"), "data")  # the tiny scene's Gaussian blob does not change in time
     with pytest.raises(ValueError, match="phantom 'gaussian_blob' does not change in time.*phantom=flicker"):
         frames_of(data)
+
+
+def test_each_frame_has_noise_of_its_own():
+    """A still phantom (no amplitude) over two frames: the same truth, but independent noise draws."""
+    data = group(tiny_config(*FLICKER, "phantom.amplitude=0", "data.frames=2", "data.deflection_noise=0.1",
+                             synthetic=False), "data")
+    clean = DATASETS.build({**data, "deflection_noise": 0.0}, frame=0).eps
+    a, b = ((DATASETS.build(data, frame=k).eps - clean) for k in (0, 1))
+    rms = float(a.norm(dim=-1).pow(2).mean().sqrt())
+    assert rms > 0 and float((a - b).norm(dim=-1).pow(2).mean().sqrt()) > rms  # uncorrelated: about sqrt(2) x

@@ -250,7 +250,8 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
             (the RMS magnitude of the noise vectors; perpendicular to each ray where only that part is measured),
             drawn with ``noise_seed``.
         frames, frame_rate_hz: the frames of a sequence (:func:`synthetic_frames`); ``frame``: the one to build,
-            the phantom at its ``time_s + frame / frame_rate_hz`` (None: at its own ``time_s``).
+            the phantom at its ``time_s + frame / frame_rate_hz`` (None: at its own ``time_s``), with noise
+            drawn for that frame.
     """
     SENSING.get(sensing)
     if frame is not None:
@@ -281,8 +282,9 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
     if not keep.all():
         dirs, eps, pixel, view_start = keep_rays(dirs, eps, pixel, view_start, keep)
     measured_only = sensing != "ideal"  # every sensing but ideal goes through image displacements
-    if deflection_noise > 0:
-        eps = with_noise(eps, dirs if measured_only else None, deflection_noise, noise_seed)
+    if deflection_noise > 0:  # each frame of a series has noise of its own, as each exposure does
+        seed = noise_seed if frame is None else noise_seed + 7919 * (int(frame) + 1)
+        eps = with_noise(eps, dirs if measured_only else None, deflection_noise, seed)
     return Scene(ph.box, ambient, cameras, origins, dirs, eps.to(device), pixel, view_start, ph.T, record,
                  perpendicular_only=measured_only)
 

@@ -70,52 +70,76 @@ class VoxelProjector:
 
 
 def interpolation_matrix(box: ProbeBox, origins: torch.Tensor, dirs: torch.Tensor, step_mm: Optional[float] = None,
-                         chunk: int = 1 << 14) -> torch.Tensor:
-    """S: (R, V) sparse COO, ``(S v)_r = sum_i v(p_ri) dt_ri`` for a voxel field v flattened as (nx, ny, nz),
-    with the samples and the border-clamped trilinear weights of :func:`nerif.renderers.voxel.voxel_deflection`."""
+                         chunk: int = 512) -> torch.Tensor:
+    """S: (R, V) sparse CSR, ``(S v)_r = sum_i v(p_ri) dt_ri`` for a voxel field v flattened as (nx, ny, nz),
+    with the samples and the border-clamped trilinear weights of :func:`nerif.renderers.voxel.voxel_deflection`;
+    one entry per ray and voxel, int32 indices where they fit. Built ``chunk`` rays at a time: small chunks
+    keep the sort that merges each ray's entries in cache (3x faster at 512 rays than at 16384)."""
     sampler = chord_sampler(box, step_mm)
     n = torch.as_tensor(box.shape, device=dirs.device)
+    V = int(n.prod())
     half = torch.as_tensor(box.half_mm, dtype=dirs.dtype, device=dirs.device)
-    parts = []
+    counts, cols, vals = [], [], []
     for i in range(0, len(dirs), chunk):
         s = sampler(box, origins[i:i + chunk], dirs[i:i + chunk])
         u = ((s.positions + half) / box.voxel_mm - 0.5).clamp(min=torch.zeros_like(half), max=(n - 1).to(half))
         i0 = torch.minimum(u.floor().long(), n - 2)
         f = u - i0
-        rows, cols, vals = [], [], []
+        keys, ws = [], []
         for corner in range(8):
             c = torch.tensor([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1], device=dirs.device)
             idx = i0 + c
-            w = torch.where(c.bool(), f, 1 - f).prod(-1) * s.dt
-            rows.append(s.ray_index + i)
-            cols.append((idx[:, 0] * n[1] + idx[:, 1]) * n[2] + idx[:, 2])
-            vals.append(w)
-        part = torch.sparse_coo_tensor(torch.stack([torch.cat(rows), torch.cat(cols)]), torch.cat(vals),
-                                       (len(dirs), int(n.prod())), check_invariants=False).coalesce()
-        parts.append(part)
-    idx = torch.cat([p.indices() for p in parts], 1)
-    val = torch.cat([p.values() for p in parts])
-    return torch.sparse_coo_tensor(idx, val, (len(dirs), int(n.prod())), is_coalesced=True, check_invariants=False)
+            ws.append(torch.where(c.bool(), f, 1 - f).prod(-1) * s.dt)
+            keys.append(s.ray_index * V + (idx[:, 0] * n[1] + idx[:, 1]) * n[2] + idx[:, 2])  # row-major (ray, voxel)
+        rays = min(chunk, len(dirs) - i)
+        key, inverse = torch.unique(torch.cat(keys), return_inverse=True)  # sorted by ray, then voxel
+        w = torch.zeros(len(key), dtype=dirs.dtype, device=dirs.device).index_add_(0, inverse, torch.cat(ws))
+        counts.append(torch.bincount(key // V, minlength=rays))
+        cols.append((key % V).to(torch.int32))
+        vals.append(w)
+    nnz_per_row = torch.cat(counts) if counts else torch.zeros(0, dtype=torch.long, device=dirs.device)
+    crow = torch.cat([nnz_per_row.new_zeros(1), nnz_per_row.cumsum(0)])
+    index = torch.int32 if int(crow[-1]) < 2**31 else torch.int64
+    col = torch.cat(cols) if cols else torch.zeros(0, dtype=torch.int32, device=dirs.device)
+    val = torch.cat(vals) if vals else torch.zeros(0, dtype=dirs.dtype, device=dirs.device)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Sparse CSR tensor support is in beta")
+        return torch.sparse_csr_tensor(crow.to(index), col.to(index), val, (len(dirs), V), check_invariants=False)
+
+
+def transpose_csr(S: torch.Tensor) -> torch.Tensor:
+    """S^T as CSR (the compressed columns of S), with S's index type."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Sparse CSR tensor support is in beta")
+        csc = S.to_sparse_csc()
+        return torch.sparse_csr_tensor(csc.ccol_indices(), csc.row_indices(), csc.values(), (S.shape[1], S.shape[0]),
+                                       check_invariants=False)
 
 
 @PROJECTORS.register("sparse")
 class SparseProjector:
-    """``A = S G`` with S stored (CSR, and its transpose); same arguments as :class:`VoxelProjector`."""
+    """``A = S G`` with S stored (CSR, and its transpose); same arguments as :class:`VoxelProjector` (S is built
+    in batches of at most 512 rays)."""
 
     @staticmethod
-    def memory_bytes(box: ProbeBox, n_rays: int, step_mm: Optional[float] = None) -> float:
-        """Upper bound of the memory S and its transpose take (8 trilinear weights per sample, int64 + float)."""
-        return 2 * n_rays * chord_sampler(box, step_mm).samples_per_ray * 8 * 12.0
+    def memory_bytes(box: ProbeBox, origins: torch.Tensor, dirs: torch.Tensor, step_mm: Optional[float] = None,
+                     probe_rays: int = 2000) -> float:
+        """The memory S and its transpose will take: the entries per ray of up to ``probe_rays`` rays (a fixed
+        random subset) times the rays, 4-byte indices and the values' bytes each, twice, plus the row offsets."""
+        R = len(dirs)
+        if R == 0:
+            return 0.0
+        pick = torch.randperm(R, generator=torch.Generator().manual_seed(0))[:probe_rays].to(dirs.device)
+        per_ray = interpolation_matrix(box, origins[pick], dirs[pick], step_mm).values().numel() / len(pick)
+        entry = 4 + dirs.element_size()
+        return 2 * per_ray * R * entry + 4 * (R + int(torch.as_tensor(box.shape).prod()) + 2)
 
     def __init__(self, box: ProbeBox, origins: torch.Tensor, dirs: torch.Tensor, step_mm: Optional[float] = None,
                  chunk: int = 1 << 14):
         self.box, self.shape = box, tuple(box.shape)
-        S = interpolation_matrix(box, origins, dirs, step_mm, chunk)
-        self.nnz = S._nnz()
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message="Sparse CSR tensor support is in beta")
-            self.S = S.to_sparse_csr()
-            self.St = S.t().coalesce().to_sparse_csr()
+        self.S = interpolation_matrix(box, origins, dirs, step_mm, min(chunk, 512))
+        self.nnz = self.S.values().numel()
+        self.St = transpose_csr(self.S)
 
     def _grad(self, x: torch.Tensor) -> torch.Tensor:
         return gradient_volume(x, self.box.voxel_mm).reshape(3, -1).T  # (V, 3)

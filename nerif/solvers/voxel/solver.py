@@ -95,7 +95,8 @@ class CGLSSolver(IterativeSolver):
         origins = scene.origins[scene.ray_views()].to(dt)
         projector = self.projector_name
         if projector == "auto":
-            fits = SparseProjector.memory_bytes(scene.box, len(origins), self.step_mm) <= self.max_matrix_gib * 2**30
+            need = SparseProjector.memory_bytes(scene.box, origins, scene.dirs.to(dt), self.step_mm)
+            fits = need <= self.max_matrix_gib * 2**30
             projector = "sparse" if fits else "matrix_free"
         self.projector = built_projector(projector, scene.box, origins, scene.dirs.to(dt), self.step_mm, self.chunk)
         self.projector_name = projector
