@@ -111,7 +111,7 @@ def run_sequence(cfg: DictConfig, out_dir: Path, device: torch.device, frames: l
         metrics["deflection_unit"] = unit
     metrics["total_time_s"] = time.perf_counter() - t_start
     write_json(metrics, out_dir / "metrics.json")
-    print(summary_line(metrics, out_dir, f"{len(rows)} frames, means: "), flush=True)
+    print(summary_line(metrics, out_dir, f"{len(rows)} frame{'s' * (len(rows) != 1)}, means: "), flush=True)
     return metrics
 
 

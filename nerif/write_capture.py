@@ -39,7 +39,7 @@ def main(argv=None) -> Path:
 
         root = write_capture(scenes(), Path(args.path), times=[f.time_s for f in frames])
     views = len(read_rig(root)["views"]["angles_deg"])
-    what = f"{len(frames)} frames of {views} views" if frames else f"{views} views"
+    what = f"{len(frames)} frame{'s' * (len(frames) != 1)} of {views} views" if frames else f"{views} views"
     print(f"capture of {what} written to {root}; reconstruct it with: python -m nerif data=capture data.root={root}")
     return root
 

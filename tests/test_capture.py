@@ -159,6 +159,10 @@ def test_a_series_reads_back_frame_by_frame(series):
     assert rig["frames"][1]["images"][0] == "frame_0001/distorted_00.png"
     assert capture_frames(str(root)) == [Frame(0, 0.0), Frame(1, pytest.approx(1 / 24)), Frame(2, pytest.approx(2 / 24))]
     assert capture_frames(str(root), frames=[1, 2])[0].index == 1
+    from nerif.data.frames import frames_of
+
+    picked = tiny_config("data=capture", f"data.root={root}", "data.frames=[0,2]", synthetic=False)  # as users write it
+    assert [f.index for f in frames_of(OmegaConf.to_container(picked.data, resolve=True))] == [0, 2]
     n = int(scenes[0].view_start[6])
     caps = [capture(str(root), FLOW, binning=8, frame=k) for k in range(2)]
     truth = [s.eps[:n] for s in scenes[:2]]
