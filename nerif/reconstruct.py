@@ -40,10 +40,12 @@ def checkpoint_to_resume(setting, own: Path) -> Optional[Path]:
 
 
 def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Optional[int] = None,
-                start_from: Optional[Path] = None, t_start: Optional[float] = None, about: Optional[dict] = None) -> dict:
+                start_from: Optional[Path] = None, t_start: Optional[float] = None, about: Optional[dict] = None,
+                resume_hint: Optional[str] = None) -> dict:
     """One reconstruction (of ``frame`` of a time series, or of the steady scene) into ``out_dir``: build the
     parts, train (from the state of ``start_from``, a checkpoint of the previous frame, unless the run resumes
-    its own), write every output (``about``: entries added to its ``metrics.json``). Returns the final metrics."""
+    its own), write every output (``about``: entries added to its ``metrics.json``). Returns the final metrics.
+    ``resume_hint``: how to continue after an interruption (default: from this run's checkpoint)."""
     t_start = time.perf_counter() if t_start is None else t_start
     torch.manual_seed(cfg.seed)
     # every check that can fail happens here, before any training; the solver checks its settings before any data
@@ -90,7 +92,8 @@ def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Opt
              ", ".join(f"{k} {v}" for k, v in solver.labels.items()), device)
     try:
         solver.fit(checkpoint_every=tc.checkpoint_every, checkpoint_every_s=tc.checkpoint_every_s,
-                   checkpoint=checkpoint, on_eval=on_eval, on_step=on_step, progress=tc.progress)
+                   checkpoint=checkpoint, on_eval=on_eval, on_step=on_step, progress=tc.progress,
+                   resume_hint=resume_hint)
     finally:
         writer.close()
 

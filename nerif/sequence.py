@@ -92,11 +92,13 @@ def run_sequence(cfg: DictConfig, out_dir: Path, device: torch.device, frames: l
                 m = json.loads((folder / "metrics.json").read_text())
                 log.info("frame %d (%d of %d) was finished before: kept", f.index, j + 1, len(frames))
             else:
-                log.info("frame %d (%d of %d, t = %.4g s): %s", f.index, j + 1, len(frames), f.time_s,
-                         f"warm start from {previous.parent.name}" if warm else "cold start")
+                how = ("continued from its own checkpoint" if again and (folder / "checkpoint.pt").is_file()
+                       else f"warm start from {previous.parent.name}" if warm else "cold start")
+                log.info("frame %d (%d of %d, t = %.4g s): %s", f.index, j + 1, len(frames), f.time_s, how)
                 m = reconstruct(frame_config(cfg, warm), folder, device, frame=f.index,
                                 start_from=previous if warm else None,
-                                about={"frame": f.index, "time_s": f.time_s, "warm_start": warm})
+                                about={"frame": f.index, "time_s": f.time_s, "warm_start": warm},
+                                resume_hint=f"the same command and train.resume=auto hydra.run.dir={out_dir}")
             rows.append({**{k: m.get(k) for k in FINAL_KEYS}, "frame": f.index, "time_s": f.time_s,
                          "warm_start": bool(m.get("warm_start")), "folder": folder.name})
             unit = m.get("deflection_unit", unit)

@@ -238,11 +238,13 @@ class IterativeSolver:
     # --- loop ---
     def fit(self, *, checkpoint_every: int, checkpoint: Optional[Path] = None,
             on_eval: Optional[Callable[[dict], None]] = None, on_step: Optional[Callable[[int, dict], None]] = None,
-            progress: bool = True, checkpoint_every_s: Optional[float] = None) -> dict:
+            progress: bool = True, checkpoint_every_s: Optional[float] = None,
+            resume_hint: Optional[str] = None) -> dict:
         """Run to ``iterations``, or until converged (a step's ``converged`` term, or :attr:`converged` set by an
         evaluation); evaluates every :attr:`eval_every` and at the end, checkpoints (atomically)
         every ``checkpoint_every`` iterations, at most ``checkpoint_every_s`` seconds apart, at the end and on
-        Ctrl-C, SIGTERM or SIGUSR2 (then raises :class:`Interrupted`). An exception from ``step`` leaves the last good
+        Ctrl-C, SIGTERM or SIGUSR2 (then raises :class:`Interrupted`, after one line saying how to continue:
+        ``resume_hint``, default ``train.resume=<checkpoint>``). An exception from ``step`` leaves the last good
         checkpoint in place."""
         from tqdm import tqdm
 
@@ -276,8 +278,8 @@ class IterativeSolver:
             what = e.signal_name if isinstance(e, Interrupted) else "SIGINT"
             if checkpoint is not None and self.iteration > 0:
                 self.save(checkpoint)
-                log.warning("%s at iteration %d: checkpoint saved to %s (continue with train.resume=%s)", what,
-                            self.iteration, checkpoint, checkpoint)
+                log.warning("%s at iteration %d: checkpoint saved to %s (continue with %s)", what, self.iteration,
+                            checkpoint, resume_hint or f"train.resume={checkpoint}")
             else:
                 log.warning("%s at iteration %d: nothing to save", what, self.iteration)
             raise Interrupted(what) from None
