@@ -159,9 +159,10 @@ def capture_files(root: Path, rig: dict, frame: int = 0) -> tuple[list[Path], li
             kind = f"{where}view {k} image" if k < n else f"view {k - n} reference"
             raise FileNotFoundError(f"{root / RIG_FILE} lists {kind} '{p.relative_to(root)}', which does not exist "
                                     f"in {root}: add the file or remove the {'frame' if where and k < n else 'view'}")
+    top = root.resolve()
     listed = {(root / f).resolve() for fr in frames for f in fr["images"]} | {p.resolve() for p in references}
-    folders = {p.parent for p in listed} | {root.resolve()}
-    extra = sorted(str(p.relative_to(root.resolve())) for d in folders for p in d.iterdir()
+    folders = {p.parent for p in listed if top in p.parents} | {top}  # the capture's own folders, not a shared one
+    extra = sorted(str(p.relative_to(top)) for d in folders for p in d.iterdir()
                    if p.suffix.lower() in IMAGE_SUFFIXES and p.resolve() not in listed)
     if extra:
         raise ValueError(f"{root} holds image(s) {', '.join(extra)} that {RIG_FILE} does not list: add each to "
