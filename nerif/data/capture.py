@@ -107,7 +107,9 @@ def rig_frames(rig: dict, path: Path = Path(RIG_FILE)) -> list[dict]:
     """The frames of a rig file, each ``{"time_s", "images"}`` with one image per view: its ``frames`` list
     (version 2), or its ``views.images`` as one frame at time 0; checked."""
     views, n = rig["views"], len(rig["views"]["angles_deg"])
-    if ("frames" in rig) == ("images" in views) or (rig.get("version") == 1 and "frames" in rig):
+    if rig.get("version") == 1 and "frames" in rig:
+        raise ValueError(f"{path}: a frames list (a time series) needs 'version: 2'")
+    if ("frames" in rig) == ("images" in views):
         raise ValueError(f"{path}: give the images either as views.images (one steady state) or as a frames list "
                          f"(a time series, version 2), {'not both' if 'frames' in rig else 'one of them'}")
     if "images" in views:
@@ -170,8 +172,9 @@ def capture_files(root: Path, rig: dict, frame: int = 0) -> tuple[list[Path], li
     return distorted, references
 
 
-def read_images(paths: list[Path], sensor_px) -> list[np.ndarray]:
-    """Images as floats in [0, 1]; all of one bit depth and of the rig's sensor size."""
+def read_images(paths: list[Path], sensor_px, keep: bool = True) -> list[np.ndarray]:
+    """Images as floats in [0, 1]; all of one bit depth and of the rig's sensor size (``keep=False``: only
+    checked, one at a time, and none returned: a long series is checked without holding it in memory)."""
     w, h = (int(x) for x in sensor_px)
     out, depth = [], None
     for p in paths:
@@ -184,7 +187,8 @@ def read_images(paths: list[Path], sensor_px) -> list[np.ndarray]:
         elif img.dtype != depth[0]:
             raise ValueError(f"{p} is {img.dtype} but {depth[1].name} is {depth[0]}: save every image with the same "
                              "bit depth (8 or 16 bit)")
-        out.append(img.astype(np.float32) / _DEPTHS[img.dtype])
+        if keep:
+            out.append(img.astype(np.float32) / _DEPTHS[img.dtype])
     return out
 
 
@@ -238,7 +242,7 @@ def capture_frames(root: str, frames=None, **_) -> Optional[list[Frame]]:
     for k in picked:
         d, references = capture_files(root, rig, k)
         distorted += d
-    read_images(distorted + references, rig["camera"]["sensor_px"])
+    read_images(distorted + references, rig["camera"]["sensor_px"], keep=False)
     return [Frame(k, listed[k]["time_s"]) for k in picked]
 
 
