@@ -14,6 +14,12 @@ from nerif.io.export import atomic_write  # noqa: E402
 from nerif.geometry import ProbeBox  # noqa: E402
 
 
+def extent(box: ProbeBox, vertical: int) -> list[float]:
+    """imshow extent [mm] of a slice with x across and axis ``vertical`` (1: y, 2: z) up, to the voxel edges."""
+    axes, h = box.axes(), box.voxel_mm / 2
+    return [axes[0][0] - h, axes[0][-1] + h, axes[vertical][0] - h, axes[vertical][-1] + h]
+
+
 def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = None, title: str = "",
                  unit: str = "K", hot: int = 1):
     """Central vertical slice (x-y at z = 0) and horizontal slice (x-z through the hottest layer) of the
@@ -22,10 +28,8 @@ def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = No
     ref = T_true if T_true is not None else T
     iz = box.shape[2] // 2
     iy = int(np.unravel_index(np.argmax(hot * ref), ref.shape)[1])
-    ax_x, ax_y, ax_z = box.axes()
-    h = box.voxel_mm / 2
-    ext_xy = [ax_x[0] - h, ax_x[-1] + h, ax_y[0] - h, ax_y[-1] + h]
-    ext_xz = [ax_x[0] - h, ax_x[-1] + h, ax_z[0] - h, ax_z[-1] + h]
+    _, ax_y, ax_z = box.axes()
+    ext_xy, ext_xz = extent(box, 1), extent(box, 2)
     cols = [("reconstruction", T)] + ([("truth", T_true), ("error", T - T_true)] if T_true is not None else [])
     vmin, vmax = float(min(T.min(), ref.min())), float(max(T.max(), ref.max()))
     fig, axes = plt.subplots(2, len(cols), figsize=(3.6 * len(cols), 7.2), squeeze=False)
@@ -56,9 +60,7 @@ def sequence_figure(frames: list[tuple[str, np.ndarray, Optional[np.ndarray]]], 
     rows = [("reconstruction", [v for _, v, _ in frames])] + ([("truth", truth)] if len(truth) == len(frames) else [])
     every = [v for _, vols in rows for v in vols]
     vmin, vmax = float(min(v.min() for v in every)), float(max(v.max() for v in every))
-    ax_x, ax_y, _ = box.axes()
-    h, iz = box.voxel_mm / 2, box.shape[2] // 2
-    ext = [ax_x[0] - h, ax_x[-1] + h, ax_y[0] - h, ax_y[-1] + h]
+    ext, iz = extent(box, 1), box.shape[2] // 2
     fig, axes = plt.subplots(len(rows), len(frames), figsize=(1.9 * len(frames) + 1.2, 3.0 * len(rows) + 0.6),
                              squeeze=False)
     for i, (name, vols) in enumerate(rows):
