@@ -54,7 +54,7 @@ def compare(cold: list[dict], warm: list[dict], metric: str) -> list[dict]:
     rows = []
     for c, w in zip(cold, warm):
         target = c["history"][-1][metric]
-        it, s = reach(w["history"], metric, target)
+        it, s = reach(w["history"], metric, target) if w["warm_start"] else (None, None)
         rows.append({"frame": c["frame"], "time_s": c["time_s"], "cold_iterations": c["iterations"],
                      "cold_error": target, "cold_wall_s": c["wall_time_s"], "warm": w["warm_start"],
                      "warm_iterations": w["iterations"], "warm_error": w["history"][-1][metric],
