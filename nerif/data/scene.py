@@ -253,10 +253,9 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
             the phantom at its ``time_s + frame / frame_rate_hz`` (None: at its own ``time_s``), with noise
             drawn for that frame.
     """
-    SENSING.get(sensing)
+    SENSING.get(sensing)  # an unknown name fails here, before any rendering
     if frame is not None:
-        t = synthetic_frames(phantom, [int(frame)], frame_rate_hz)[0].time_s
-        phantom = dict(phantom, time_s=t)  # an unknown name fails here, before any rendering
+        phantom = dict(phantom, time_s=synthetic_frames(phantom, [int(frame)], frame_rate_hz)[0].time_s)
     if not 0.0 <= deflection_noise < 10.0:
         raise ValueError(f"data.deflection_noise={deflection_noise}: a fraction of the RMS deflection, within [0, 10)")
     sensor = dict(sensor or {}) if sensing == "realistic" else {}  # the only sensing with parameters
