@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -102,8 +103,7 @@ def main(argv=None) -> dict:
     runs.update({f"warm, {w}": w.split() for w in args.warm})
     threads = max(1, (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()) // args.jobs)
     todo, running = list(runs.items()), []
-    folders = {name: out / name.replace(" ", "_").replace(",", "").replace("(", "").replace(")", "").replace("=", "-")
-               for name in runs}
+    folders = {name: out / re.sub(r"[^\w.-]+", "_", name).strip("_") for name in runs}
     if args.keep:  # series already finished under --out (with the same settings) are not run again
         todo = [(n, e) for n, e in todo if not (folders[n] / "metrics.json").is_file()]
     while todo or running:
