@@ -63,3 +63,13 @@ def test_arc_rig_at_given_angles_and_binning_is_recorded():
     cams = arc_rig(angles_deg=[0.0, -90.0], binning=8)
     assert len(cams) == 2 and np.allclose(cams[1].position, [-800.0, 0.0, 0.0], atol=1e-9)
     assert cams[0].binning == 8 and cams[0].unbinned(8).binning == 1 and cams[0].unbinned(8).width == 720
+
+
+def test_pixels_per_mm_is_the_image_scale_across_the_line_of_sight():
+    cam = arc_rig(n_cameras=3, binning=4)[1]
+    point = np.array([3.0, -5.0, 2.0])
+    across = np.cross(cam.rotation[:, 2], [0.0, 1.0, 0.0])
+    across /= np.linalg.norm(across)
+    uv = cam.project(np.stack([point - 0.05 * across, point + 0.05 * across]))
+    assert cam.pixels_per_mm(point) == pytest.approx(np.linalg.norm(uv[1] - uv[0]) / 0.1, rel=1e-3)
+    assert cam.binned(2).pixels_per_mm(point) == pytest.approx(cam.pixels_per_mm(point) / 2)

@@ -5,11 +5,19 @@ World frame in millimetres, origin at the box centre, ``y`` vertical. Volumes ar
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 import torch.nn.functional as F
+
+
+@functools.lru_cache(maxsize=64)
+def _constant(values: tuple, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """A small constant tensor made once per dtype and device: on a GPU each ``torch.as_tensor`` of host data is a
+    copy that waits for the work queued before it, several times per training step otherwise."""
+    return torch.tensor(values, dtype=dtype, device=device)
 
 
 @dataclass(frozen=True)
@@ -39,6 +47,10 @@ class ProbeBox:
     def half_mm(self) -> np.ndarray:
         return self.extent_mm / 2
 
+    def half_like(self, x: torch.Tensor) -> torch.Tensor:
+        """:attr:`half_mm` as a (3,) tensor of ``x``'s dtype and device (made once per dtype and device)."""
+        return _constant(tuple(self.half_mm.tolist()), x.dtype, x.device)
+
     @property
     def scale_mm(self) -> float:
         """Half of the longest edge [mm]: world / scale_mm = network coordinates (isotropic)."""
@@ -63,15 +75,15 @@ class ProbeBox:
 
     def to_grid(self, p: torch.Tensor) -> torch.Tensor:
         """World [mm] -> ``grid_sample`` coordinates (per axis, box faces at -1 and +1). (..., 3) -> (..., 3)."""
-        return p / torch.as_tensor(self.half_mm, dtype=p.dtype, device=p.device)
+        return p / self.half_like(p)
 
     def from_grid(self, g: torch.Tensor) -> torch.Tensor:
         """Inverse of :meth:`to_grid`: per-axis [-1, 1] (box faces) -> world [mm]. (..., 3) -> (..., 3)."""
-        return g * torch.as_tensor(self.half_mm, dtype=g.dtype, device=g.device)
+        return g * self.half_like(g)
 
     def contains(self, p: torch.Tensor) -> torch.Tensor:
         """(..., 3) [mm] -> (...) bool."""
-        return (p.abs() <= torch.as_tensor(self.half_mm, dtype=p.dtype, device=p.device)).all(-1)
+        return (p.abs() <= self.half_like(p)).all(-1)
 
     def intersect(self, origins: torch.Tensor, dirs: torch.Tensor):
         """Slab test of rays against the box.
@@ -82,7 +94,7 @@ class ProbeBox:
             t_near, t_far: (R,) [mm] along each ray (clamped to t >= 0); hit: (R,) bool (entered over a
             positive length).
         """
-        half = torch.as_tensor(self.half_mm, dtype=dirs.dtype, device=dirs.device)
+        half = self.half_like(dirs)
         safe = torch.where(dirs.abs() < 1e-12, torch.full_like(dirs, 1e-12), dirs)
         inv = 1.0 / safe
         t0 = (-half - origins) * inv

@@ -77,6 +77,11 @@ class Camera:
         k = self.image_distance_mm / self.pitch_mm
         return np.stack([pc[..., 0] / pc[..., 2] * k + cx, pc[..., 1] / pc[..., 2] * k + cy], -1)
 
+    def pixels_per_mm(self, point) -> float:
+        """The image scale at a world point (3,) [mm]: pixels per mm of a length across the line of sight there."""
+        depth = float((np.asarray(point, dtype=np.float64) - self.position) @ self.rotation[:, 2])
+        return self.image_distance_mm / (self.pitch_mm * depth)
+
 
 def camera_from_nerf_pose(c2w, focal_px: float, width: int, height: int, cx: float, cy: float, pitch_mm: float,
                           length_mm: float, f_number: float, background_mm: float, focal_mm: float,

@@ -52,6 +52,7 @@ class AmbientBoundary:
 
     def __init__(self, box: ProbeBox, faces: Sequence[str] = ("x",), weight: float = 0.05, points: int = 256):
         self.box, self.faces, self.weight, self.points = box, box_faces(faces), float(weight), int(points)
+        self._faces = {}  # device -> (F, 2) tensor of the faces, made once (a host-to-device copy waits on a GPU)
 
     @property
     def active(self) -> bool:
@@ -60,8 +61,9 @@ class AmbientBoundary:
     def sample(self, generator: Optional[torch.Generator], device) -> torch.Tensor:
         """(points, 3) points uniform on each ambient face, the faces drawn evenly [mm]."""
         g = torch.rand(self.points, 3, generator=generator, device=device) * 2 - 1
-        faces = torch.as_tensor(self.faces, device=device)[
-            torch.randint(len(self.faces), (self.points,), generator=generator, device=device)]
+        if device not in self._faces:
+            self._faces[device] = torch.as_tensor(self.faces, device=device)
+        faces = self._faces[device][torch.randint(len(self.faces), (self.points,), generator=generator, device=device)]
         g[torch.arange(self.points, device=device), faces[:, 0]] = faces[:, 1].to(g.dtype)
         return self.box.from_grid(g)
 

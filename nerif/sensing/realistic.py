@@ -101,7 +101,7 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
             "camera": [ren_cam.position.tolist(), ren_cam.rotation.tolist(), ren_cam.f_number, ren_cam.focal_mm,
                        ren_cam.background_mm, ren_cam.pitch_mm, ren_cam.width, ren_cam.height]},
             lambda: {"eps": aperture_deflection(delta, box, ren_cam, d_ren, aperture_rays, step_mm).cpu().numpy()},
-        )["eps"], dtype=torch.float64)
+        )["eps"], dtype=torch.float64, device=d_ren.device)  # the cache gives it back on the CPU
         u_ren = deflection_to_displacement(eps_ren, d_ren, img_cam).cpu().numpy().astype(np.float32)
         u_ren = u_ren.reshape(ren_cam.height, ren_cam.width, 2)
 

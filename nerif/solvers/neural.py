@@ -3,6 +3,7 @@ and its steps."""
 from __future__ import annotations
 
 import logging
+import math
 import time
 from pathlib import Path
 from typing import Mapping, Optional
@@ -242,28 +243,31 @@ class NeuralSolver(IterativeSolver):
         tv = self.tv(self.field, self.generator) if self.tv is not None else None
         if tv is not None:
             loss = loss + tv
-        if not torch.isfinite(loss):
-            raise DivergenceError(f"the loss became {loss.item()} at iteration {self.iteration}: the run diverged "
-                                  "(try a lower train.lr)")
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
         self.scheduler.step()
-        if self.device.type == "cuda":
-            torch.cuda.synchronize()
+        named = {"loss": loss, **{f"loss_{n}": t for n, t in terms.items()}}
+        if boundary is not None:
+            named["loss_boundary"] = boundary
+        if tv is not None:
+            named["loss_tv"] = tv
+        per_ray = samples.per_ray
+        # every number of the step in one transfer: one wait for the device per step, not one per number
+        stats = torch.stack([t.detach().float() for t in named.values()] +
+                            [per_ray.max().float(), (per_ray == 0).sum().float()]).tolist()
+        out = dict(zip(named, stats[:len(named)]))
+        if not math.isfinite(out["loss"]):  # the step that made it is never saved: fit keeps the last checkpoint
+            raise DivergenceError(f"the loss became {out['loss']} at iteration {self.iteration}: the run diverged "
+                                  "(try a lower train.lr)")
         self._timed(time.perf_counter() - t0)
         self.samples_seen += len(samples.positions)
         self.rays_seen += samples.n_rays
-        per_ray = samples.per_ray
-        self.samples_max = max(self.samples_max, int(per_ray.max()))
-        self.rays_skipped += int((per_ray == 0).sum())
-        out = {"loss": loss.item(), "lr": self.optimizer.param_groups[0]["lr"], "samples_per_ray": len(samples.positions) / max(samples.n_rays, 1),
-               "rays_skipped": (per_ray == 0).float().mean().item()}
-        out.update({f"loss_{n}": t.item() for n, t in terms.items()})
-        if boundary is not None:
-            out["loss_boundary"] = boundary.item()
-        if tv is not None:
-            out["loss_tv"] = tv.item()
+        self.samples_max = max(self.samples_max, int(stats[-2]))
+        self.rays_skipped += int(stats[-1])
+        out.update(lr=self.optimizer.param_groups[0]["lr"],
+                   samples_per_ray=len(samples.positions) / max(samples.n_rays, 1),
+                   rays_skipped=stats[-1] / max(samples.n_rays, 1))
         return out
 
     # --- evaluation ---
@@ -278,10 +282,11 @@ class NeuralSolver(IterativeSolver):
     def render(self, o: torch.Tensor, d: torch.Tensor, operators=("auto", "discrete")) -> dict:
         """Deflections [rad] of rays (R, 3) by each operator, without any parameter graph."""
         out = {n: [] for n in operators}
-        for i in range(0, len(d), 4096):
-            s = self._eval_sampler(self.scene.box, o[i:i + 4096], d[i:i + 4096])
+        chunk = max(1, min(4096, (1 << 18) // self._eval_sampler.samples_per_ray))  # rays per pass: bounded memory
+        for i in range(0, len(d), chunk):
+            s = self._eval_sampler(self.scene.box, o[i:i + chunk], d[i:i + chunk])
             eps = render_deflections(self.field, s, {n: False for n in operators}, self.step_mm,
-                                     dirs=self._measured(d[i:i + 4096]), stencil=self.stencil)
+                                     dirs=self._measured(d[i:i + chunk]), stencil=self.stencil)
             for n in operators:
                 out[n].append(eps[n].detach() * self.scale)
         return {n: torch.cat(v) if v else d.new_zeros(0, 3) for n, v in out.items()}

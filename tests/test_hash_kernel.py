@@ -1,0 +1,121 @@
+"""The fused hash-encoding kernels against the tensor reference: values and table gradients to float tolerance.
+
+On the CPU the kernels run in Triton's interpreter (``TRITON_INTERPRET=1``, set in conftest.py): the same kernel
+source as on a GPU, executed block by block with NumPy."""
+import pytest
+import torch
+
+from nerif.encoders import hash_kernel
+from nerif.encoders.hash import HashGrid
+
+pytestmark = pytest.mark.skipif(not hash_kernel.available(), reason="Triton is not installed")
+
+CASES = [  # dense levels only; dense + hashed (2^10 entries, resolutions to 64); the paper's table and resolutions
+    dict(n_levels=2, log2_table_size=15, base_resolution=4, max_resolution=16),
+    dict(n_levels=4, log2_table_size=10, base_resolution=16, max_resolution=64),
+    dict(n_levels=3, log2_table_size=19, base_resolution=16, max_resolution=512),
+]
+
+
+def encoders(case: dict, interpolation: str, n_features: int = 2):
+    ref = HashGrid(**case, n_features=n_features, init_scale=1.0, interpolation=interpolation, kernel="torch")
+    fused = HashGrid(**case, n_features=n_features, init_scale=1.0, interpolation=interpolation, kernel="fused")
+    fused.load_state_dict(ref.state_dict())
+    return ref, fused
+
+
+@pytest.mark.parametrize("interpolation", ["linear", "smoothstep"])
+@pytest.mark.parametrize("case", CASES)
+def test_fused_matches_reference(case, interpolation):
+    ref, fused = encoders(case, interpolation)
+    x = torch.rand(300, 3) * 2.4 - 1.2  # 300: not a multiple of the block; some points beyond [-1, 1] (clamped)
+    x[:4] = torch.tensor([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0], [1.0, -1.0, 0.0], [0.0, 0.0, 0.0]])  # faces, corners
+    assert fused.fused(x) and not ref.fused(x)
+    y_ref, y = ref(x), fused(x)
+    assert y.shape == y_ref.shape == (300, ref.out_dim)
+    assert torch.allclose(y, y_ref, rtol=1e-5, atol=1e-6)
+    g = torch.randn_like(y)
+    (grad_ref,) = torch.autograd.grad(y_ref, ref.table, g)
+    (grad,) = torch.autograd.grad(y, fused.table, g)
+    assert grad.abs().max() > 0.1  # the check below compares real gradients
+    assert torch.allclose(grad, grad_ref, rtol=1e-5, atol=1e-6)
+
+
+def test_one_feature_and_no_points():
+    ref, fused = encoders(CASES[1], "linear", n_features=1)
+    x = torch.rand(50, 3) * 2 - 1
+    assert torch.allclose(fused(x), ref(x), rtol=1e-5, atol=1e-6)
+    empty = fused(torch.zeros(0, 3))
+    assert empty.shape == (0, ref.out_dim)
+    empty.sum().backward()
+    assert fused.table.grad.abs().sum() == 0
+
+
+def test_positions_that_need_a_gradient_take_the_reference():
+    """grad=auto differentiates the encoding by position: the kernels give no position gradient, so the encoder
+    must not use them there (the position gradient then equals the reference's)."""
+    ref, fused = encoders(CASES[1], "smoothstep")
+    x = (torch.rand(40, 3) * 2 - 1).requires_grad_(True)
+    assert not fused.fused(x)
+    (gx_ref,) = torch.autograd.grad(ref(x).sum(), x)
+    (gx,) = torch.autograd.grad(fused(x).sum(), x)
+    assert gx.abs().max() > 0 and torch.allclose(gx, gx_ref)
+
+
+def test_auto_uses_the_kernels_only_on_cuda():
+    enc = HashGrid(n_levels=2, max_resolution=32, kernel="auto")
+    assert not enc.fused(torch.zeros(5, 3))  # CPU: the tensor path
+
+
+def test_training_steps_match():
+    """Three training steps of the tiny scene's solver (discrete gradients, 3-D gate, ambient boundary) with the
+    kernels and with the reference: the same losses and table gradients, to float tolerance."""
+    from nerif.configs import group
+    from nerif.data import DATASETS
+    from nerif.masks import MASKS
+    from tests.helpers import solver, tiny_config
+
+    runs = []
+    for kernel in ("torch", "fused"):
+        cfg = tiny_config("encoder.kernel=" + kernel, "mask=3d", "sampler=uniform", "field.hash_levels=2",
+                          "train.rays_per_batch=16")
+        scene = DATASETS.build(group(cfg, "data"))
+        torch.manual_seed(0)
+        s = solver(cfg, scene, MASKS.build(group(cfg, "mask"), scene=scene))
+        losses = []
+        for i in range(3):
+            losses.append(s.step()["loss"])
+            s.iteration += 1
+            if i == 1:  # a table gradient (step 0 has none: the last layer starts at zero; later Adam steps amplify rounding)
+                grad = s.field.encoder.table.grad.clone()
+        runs.append((losses, grad))
+    (l_ref, g_ref), (l, g) = runs
+    assert l_ref[-1] < l_ref[0]  # the steps train
+    assert l == pytest.approx(l_ref, rel=1e-4)
+    assert g_ref.abs().max() > 0 and (g_ref - g).abs().max() <= 1e-4 * g_ref.abs().max()
+
+
+def test_kernels_that_fail_leave_the_tensor_path(monkeypatch, caplog):
+    """kernel=auto on a device where the kernels fail (a Triton that cannot compile them) warns once and encodes
+    through the tensor path: the run goes on, slower."""
+    from nerif.encoders import hash as hash_module
+
+    def broken(*args):
+        raise RuntimeError("PTX compile failed")
+
+    monkeypatch.setattr(hash_kernel.FusedHashEncoding, "apply", broken)
+    hash_module.kernels_agree.cache_clear()
+    try:
+        assert not hash_module.kernels_agree(torch.device("cpu"))
+        assert "PTX compile failed" in caplog.text and "tensor path" in caplog.text
+    finally:
+        hash_module.kernels_agree.cache_clear()
+
+
+def test_kernels_agree_with_the_reference_here():
+    from nerif.encoders import hash as hash_module
+
+    hash_module.kernels_agree.cache_clear()
+    with torch.no_grad():  # as from an evaluation: the check still differentiates
+        assert hash_module.kernels_agree(torch.device("cpu"))  # the interpreter runs the same kernels
+    hash_module.kernels_agree.cache_clear()
