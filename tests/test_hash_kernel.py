@@ -1,15 +1,16 @@
 """The fused hash-encoding kernels against the tensor reference: values and table gradients to float tolerance.
 
-On the CPU the kernels run in Triton's interpreter (``TRITON_INTERPRET=1``, set in conftest.py): the same kernel
-source as on a GPU, executed block by block with NumPy."""
+Both backends run here: ``cpp`` compiled for this CPU, ``triton`` in Triton's interpreter (``TRITON_INTERPRET=1``,
+set in conftest.py: the same kernel source as on a GPU, executed block by block with NumPy)."""
 import pytest
 import torch
 
 from nerif.encoders import hash_kernel
+from nerif.encoders import hash as hash_module
 from nerif.encoders.hash import HashGrid
 
-pytestmark = pytest.mark.skipif(not hash_kernel.available(), reason="Triton is not installed")
-
+BACKENDS = [pytest.param(b, marks=pytest.mark.skipif(not hash_kernel.available(b), reason=f"{b} cannot run here"))
+            for b in hash_kernel.BACKENDS]
 CASES = [  # dense levels only; dense + hashed (2^10 entries, resolutions to 64); the paper's table and resolutions
     dict(n_levels=2, log2_table_size=15, base_resolution=4, max_resolution=16),
     dict(n_levels=4, log2_table_size=10, base_resolution=16, max_resolution=64),
@@ -17,20 +18,21 @@ CASES = [  # dense levels only; dense + hashed (2^10 entries, resolutions to 64)
 ]
 
 
-def encoders(case: dict, interpolation: str, n_features: int = 2):
+def encoders(case: dict, interpolation: str, backend: str, n_features: int = 2):
     ref = HashGrid(**case, n_features=n_features, init_scale=1.0, interpolation=interpolation, kernel="torch")
-    fused = HashGrid(**case, n_features=n_features, init_scale=1.0, interpolation=interpolation, kernel="fused")
+    fused = HashGrid(**case, n_features=n_features, init_scale=1.0, interpolation=interpolation, kernel=backend)
     fused.load_state_dict(ref.state_dict())
     return ref, fused
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("interpolation", ["linear", "smoothstep"])
 @pytest.mark.parametrize("case", CASES)
-def test_fused_matches_reference(case, interpolation):
-    ref, fused = encoders(case, interpolation)
+def test_fused_matches_reference(case, interpolation, backend):
+    ref, fused = encoders(case, interpolation, backend)
     x = torch.rand(300, 3) * 2.4 - 1.2  # 300: not a multiple of the block; some points beyond [-1, 1] (clamped)
     x[:4] = torch.tensor([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0], [1.0, -1.0, 0.0], [0.0, 0.0, 0.0]])  # faces, corners
-    assert fused.fused(x) and not ref.fused(x)
+    assert fused.backend(x) == backend and ref.backend(x) is None
     y_ref, y = ref(x), fused(x)
     assert y.shape == y_ref.shape == (300, ref.out_dim)
     assert torch.allclose(y, y_ref, rtol=1e-5, atol=1e-6)
@@ -41,8 +43,9 @@ def test_fused_matches_reference(case, interpolation):
     assert torch.allclose(grad, grad_ref, rtol=1e-5, atol=1e-6)
 
 
-def test_one_feature_and_no_points():
-    ref, fused = encoders(CASES[1], "linear", n_features=1)
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_one_feature_and_no_points(backend):
+    ref, fused = encoders(CASES[1], "linear", backend, n_features=1)
     x = torch.rand(50, 3) * 2 - 1
     assert torch.allclose(fused(x), ref(x), rtol=1e-5, atol=1e-6)
     empty = fused(torch.zeros(0, 3))
@@ -51,23 +54,20 @@ def test_one_feature_and_no_points():
     assert fused.table.grad.abs().sum() == 0
 
 
-def test_positions_that_need_a_gradient_take_the_reference():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_positions_that_need_a_gradient_take_the_reference(backend):
     """grad=auto differentiates the encoding by position: the kernels give no position gradient, so the encoder
     must not use them there (the position gradient then equals the reference's)."""
-    ref, fused = encoders(CASES[1], "smoothstep")
+    ref, fused = encoders(CASES[1], "smoothstep", backend)
     x = (torch.rand(40, 3) * 2 - 1).requires_grad_(True)
-    assert not fused.fused(x)
+    assert fused.backend(x) is None
     (gx_ref,) = torch.autograd.grad(ref(x).sum(), x)
     (gx,) = torch.autograd.grad(fused(x).sum(), x)
     assert gx.abs().max() > 0 and torch.allclose(gx, gx_ref)
 
 
-def test_auto_uses_the_kernels_only_on_cuda():
-    enc = HashGrid(n_levels=2, max_resolution=32, kernel="auto")
-    assert not enc.fused(torch.zeros(5, 3))  # CPU: the tensor path
-
-
-def test_training_steps_match():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_training_steps_match(backend):
     """Three training steps of the tiny scene's solver (discrete gradients, 3-D gate, ambient boundary) with the
     kernels and with the reference: the same losses and table gradients, to float tolerance."""
     from nerif.configs import group
@@ -76,7 +76,7 @@ def test_training_steps_match():
     from tests.helpers import solver, tiny_config
 
     runs = []
-    for kernel in ("torch", "fused"):
+    for kernel in ("torch", backend):
         cfg = tiny_config("encoder.kernel=" + kernel, "mask=3d", "sampler=uniform", "field.hash_levels=2",
                           "train.rays_per_batch=16")
         scene = DATASETS.build(group(cfg, "data"))
@@ -95,10 +95,16 @@ def test_training_steps_match():
     assert g_ref.abs().max() > 0 and (g_ref - g).abs().max() <= 1e-4 * g_ref.abs().max()
 
 
+def test_auto_takes_the_cpu_kernel_here_when_it_builds():
+    enc = HashGrid(n_levels=2, max_resolution=32, kernel="auto")
+    x = torch.rand(5, 3)
+    assert enc.backend(x) == ("cpp" if hash_module.kernels_agree("cpp", x.device) else None)
+    assert enc.backend(x.requires_grad_(True)) is None
+
+
 def test_kernels_that_fail_leave_the_tensor_path(monkeypatch, caplog):
-    """kernel=auto on a device where the kernels fail (a Triton that cannot compile them) warns once and encodes
+    """kernel=auto on a device where the kernels fail (a compiler that cannot build them) warns once and encodes
     through the tensor path: the run goes on, slower."""
-    from nerif.encoders import hash as hash_module
 
     def broken(*args):
         raise RuntimeError("PTX compile failed")
@@ -106,16 +112,21 @@ def test_kernels_that_fail_leave_the_tensor_path(monkeypatch, caplog):
     monkeypatch.setattr(hash_kernel.FusedHashEncoding, "apply", broken)
     hash_module.kernels_agree.cache_clear()
     try:
-        assert not hash_module.kernels_agree(torch.device("cpu"))
+        assert not hash_module.kernels_agree("triton", torch.device("cpu"))
         assert "PTX compile failed" in caplog.text and "tensor path" in caplog.text
+        assert HashGrid(n_levels=2, max_resolution=32, kernel="auto").backend(torch.rand(3, 3)) is None
     finally:
         hash_module.kernels_agree.cache_clear()
 
 
-def test_kernels_agree_with_the_reference_here():
-    from nerif.encoders import hash as hash_module
-
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_kernels_agree_with_the_reference_here(backend):
     hash_module.kernels_agree.cache_clear()
     with torch.no_grad():  # as from an evaluation: the check still differentiates
-        assert hash_module.kernels_agree(torch.device("cpu"))  # the interpreter runs the same kernels
+        assert hash_module.kernels_agree(backend, torch.device("cpu"))
     hash_module.kernels_agree.cache_clear()
+
+
+def test_an_unknown_kernel_is_refused():
+    with pytest.raises(ValueError, match="hash kernel must be auto, torch, triton or cpp"):
+        HashGrid(kernel="cuda")

@@ -1,6 +1,7 @@
 import functools
 import logging
 import math
+from typing import Optional
 
 import torch
 from torch import nn
@@ -57,11 +58,12 @@ class HashGrid(nn.Module):
     size, which the finer levels must cancel; with few views the data do not pin that cancellation down and the
     field keeps axis-aligned blocks: twice the error of trilinear weights on flame families, issue 12).
 
-    ``kernel``: ``auto`` evaluates through the fused Triton kernels of :mod:`nerif.encoders.hash_kernel` on a CUDA
-    device when the positions need no gradient (central differences, evaluation; ``grad=auto`` differentiates the
-    encoding by position, so it takes the tensor path), ``torch`` always takes the tensor path (the reference),
-    ``fused`` always the kernels where positions need no gradient (on the CPU only under ``TRITON_INTERPRET=1``:
-    how the tests check them).
+    ``kernel``: the fused kernels of :mod:`nerif.encoders.hash_kernel` evaluate the encoding wherever positions need
+    no gradient (central differences, evaluation, the occupancy grid; ``grad=auto`` differentiates the encoding by
+    position and takes the tensor path): ``auto`` takes ``triton`` on CUDA and ``cpp`` on the CPU once they have been
+    checked against the tensor path on this device (:func:`kernels_agree`; else the tensor path, with one warning);
+    ``torch`` always takes the tensor path (the reference); ``triton`` or ``cpp`` name a backend outright (the
+    tests run ``triton`` on the CPU in Triton's interpreter).
 
     (N, 3) in [-1, 1]^3 -> (N, n_levels * n_features). Defaults: the CPU default scene's (8 levels 16 -> 64,
     2^15 entries, trilinear); the paper's are 16 levels 16 -> 512 and 2^19 entries (``+experiment=paper_phantom5``).
@@ -81,11 +83,10 @@ class HashGrid(nn.Module):
         super().__init__()
         if interpolation not in ("smoothstep", "linear"):
             raise ValueError(f"hash interpolation must be 'smoothstep' or 'linear', got '{interpolation}'")
-        if kernel not in ("auto", "torch", "fused"):
-            raise ValueError(f"hash kernel must be 'auto', 'torch' or 'fused', got '{kernel}'")
-        if kernel == "fused" and not hash_kernel.available():
-            raise ValueError("hash kernel 'fused' needs Triton, which is not installed (it ships with CUDA builds of "
-                             "PyTorch): use encoder.kernel=auto")
+        if kernel not in ("auto", "torch") + hash_kernel.BACKENDS:
+            raise ValueError(f"hash kernel must be auto, torch, {' or '.join(hash_kernel.BACKENDS)}, got '{kernel}'")
+        if kernel in hash_kernel.BACKENDS and not hash_kernel.available(kernel):
+            raise ValueError(f"hash kernel '{kernel}' cannot run here ({_NEEDS[kernel]}): use encoder.kernel=auto")
         self.kernel = kernel
         if not 1 <= base_resolution <= max_resolution:
             raise ValueError(f"hash resolutions need 1 <= base ({base_resolution}) <= max ({max_resolution})")
@@ -113,16 +114,20 @@ class HashGrid(nn.Module):
         self.register_buffer("mult", torch.tensor(mults, dtype=torch.int32), persistent=False)  # (L, 3)
         self.table = nn.Parameter(torch.empty(sum(sizes), n_features).uniform_(-init_scale, init_scale))
 
-    def fused(self, x: torch.Tensor) -> bool:
-        """Whether ``x`` is encoded by the fused kernels (see the class docstring)."""
-        if self.kernel == "torch" or x.requires_grad or not hash_kernel.available():
-            return False
-        return self.kernel == "fused" or (x.is_cuda and kernels_agree(x.device))
+    def backend(self, x: torch.Tensor) -> Optional[str]:
+        """The fused backend that encodes ``x``, or None for the tensor path (see the class docstring)."""
+        if self.kernel == "torch" or x.requires_grad:
+            return None
+        if self.kernel in hash_kernel.BACKENDS:
+            return self.kernel
+        backend = {"cuda": "triton", "cpu": "cpp"}.get(x.device.type)
+        return backend if backend is not None and kernels_agree(backend, x.device) else None
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if self.fused(x):
+        backend = self.backend(x)
+        if backend is not None:
             return hash_kernel.FusedHashEncoding.apply(x, self.table, self.resolution, self.mask, self.offset,
-                                                       self.mult, self.interpolation == "smoothstep")
+                                                       self.mult, self.interpolation == "smoothstep", backend)
         n, L = x.shape[0], self.n_levels
         u = ((x + 1) * 0.5).clamp(0.0, 1.0)
         pos = u[:, None, :] * self.resolution[None, :, None]  # (N, L, 3)
@@ -143,33 +148,42 @@ class HashGrid(nn.Module):
         return torch.bmm(weight, feats).reshape(n, L * self.n_features)
 
 
+_NEEDS = {"triton": "Triton is not installed; it ships with CUDA builds of PyTorch",
+          "cpp": "no C++ compiler or ninja on the PATH"}
+
+
 @functools.lru_cache(maxsize=None)
-def kernels_agree(device: torch.device) -> bool:
-    """Whether the fused kernels compile on ``device`` and give the tensor path's values and table gradients on a
-    small random encoding (checked once per device). If not, ``kernel=auto`` keeps the tensor path and one warning
-    says why: a Triton or driver that cannot build them costs speed, not the run."""
-    try:
-        with torch.enable_grad():  # the first call may come from an evaluation under no_grad
-            ok = _kernels_match(device)
-        why = "they differ from the tensor path"
-    except Exception as e:  # a compiler or driver error: report it, keep the tensor path
-        ok, why = False, f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
+def kernels_agree(backend: str, device: torch.device) -> bool:
+    """Whether the ``backend`` kernels run on ``device`` and give the tensor path's values and table gradients on a
+    small random encoding (checked once per backend and device). If not, ``kernel=auto`` keeps the tensor path and
+    one warning says why: a missing compiler, or a Triton or driver that cannot build them, costs speed, not the
+    run."""
+    if not hash_kernel.available(backend):
+        ok, why = False, _NEEDS[backend]
+    else:
+        try:
+            with torch.enable_grad():  # the first call may come from an evaluation under no_grad
+                ok = _kernels_match(backend, device)
+            why = "they differ from the tensor path"
+        except Exception as e:  # a compiler or driver error: report it, keep the tensor path
+            ok, why = False, f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
     if not ok:
-        log.warning("the fused hash kernels do not work on %s (%s): the hash encoding takes the tensor path "
-                    "(encoder.kernel=torch; slower)", device, why)
+        log.warning("the fused hash kernels (%s) do not work on %s (%s): the hash encoding takes the tensor path "
+                    "(encoder.kernel=torch; slower)", backend, device, why)
     return ok
 
 
-def _kernels_match(device: torch.device) -> bool:
-    """The fused kernels against the tensor path on 1,000 random points of a small encoding: values and table
-    gradients within float32 tolerance."""
+def _kernels_match(backend: str, device: torch.device) -> bool:
+    """The ``backend`` kernels against the tensor path on 1,000 random points of a small encoding: values and
+    table gradients within float32 tolerance."""
     g = torch.Generator().manual_seed(0)
     ref = HashGrid(n_levels=3, log2_table_size=10, base_resolution=4, max_resolution=32, init_scale=1.0,
                    kernel="torch").to(device)
     x = (torch.rand(1000, 3, generator=g) * 2.2 - 1.1).to(device)
     w = torch.randn(1000, ref.out_dim, generator=g).to(device)
     y_ref = ref(x)
-    y = hash_kernel.FusedHashEncoding.apply(x, ref.table, ref.resolution, ref.mask, ref.offset, ref.mult, False)
+    y = hash_kernel.FusedHashEncoding.apply(x, ref.table, ref.resolution, ref.mask, ref.offset, ref.mult, False,
+                                            backend)
     (g_ref,) = torch.autograd.grad(y_ref, ref.table, w)
     (g_fused,) = torch.autograd.grad(y, ref.table, w)
     return torch.allclose(y, y_ref, rtol=1e-4, atol=1e-5) and torch.allclose(g_fused, g_ref, rtol=1e-4, atol=1e-5)

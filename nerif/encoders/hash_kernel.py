@@ -1,32 +1,66 @@
-"""A fused multiresolution hash encoding for CUDA (Triton): one kernel per pass instead of a chain of tensor ops.
+"""Fused multiresolution hash encodings: one pass per point and level instead of a chain of tensor ops.
 
 :class:`nerif.encoders.hash.HashGrid` evaluates every level with tensor operations: per sample and level it builds
 the 8 corner indices and weights as tensors, gathers the table rows and blends them, and autograd keeps each of
 those tensors for the backward pass. On a GPU the blend alone (a batched 1 x 8 by 8 x F product) took three
-quarters of a training step at the paper's scale (benchmarks/RESULTS.md). Here one program computes, for a block
-of points and one level, the corners, their weights, the gathers and the blend in registers and writes only the
-(N, L F) encoding; the backward pass recomputes the corners and adds ``w * dL/dy`` into the table's gradient with
-atomic adds. It computes the same function as the reference (same cells, same hashing, same weights) and gives
-the gradient with respect to the table; positions get no gradient, so the encoder takes this path only when they
-need none (the ``discrete`` central differences, evaluation), and the reference otherwise.
+quarters of a training step at the paper's scale; on the CPU the encoding is most of a step (benchmarks/RESULTS.md).
+Here the corners, their weights, the gathers and the blend are computed per point in registers and only the
+(N, L F) encoding is written; the backward pass recomputes the corners and adds ``w * dL/dy`` into the table's
+gradient. Two backends compute the same function as the tensor path (same cells, hashing and weights):
 
-Without Triton (a CPU-only install) the module still imports and :func:`available` says False.
+- ``triton`` (CUDA): one program per block of 128 points and one level; atomic adds in the backward pass.
+  Triton ships with CUDA builds of PyTorch; on the CPU its interpreter runs it (``TRITON_INTERPRET=1``, the tests).
+- ``cpp`` (CPU): ``hash_cpu.cpp``, compiled once per machine by ``torch.utils.cpp_extension`` (g++, OpenMP): points
+  in parallel forward, levels in parallel backward (each level owns its rows of the table: no atomics).
+
+Positions get no gradient, so the encoder takes these paths only when they need none (the ``discrete`` central
+differences, evaluation, the occupancy grid), and the tensor path otherwise.
 """
 from __future__ import annotations
 
-import torch
+import functools
+import logging
+from pathlib import Path
 
+import torch
 
 try:
     import triton
     import triton.language as tl
-except ImportError:  # a CPU-only install: the reference path only
+except ImportError:  # no Triton (a CPU build of PyTorch without the dev extras): the cpp backend only
     triton = None
 
+log = logging.getLogger(__name__)
 
-def available() -> bool:
-    """Whether the fused kernels can run (Triton, which ships with CUDA builds of PyTorch, is importable)."""
-    return triton is not None
+BACKENDS = ("triton", "cpp")
+
+
+def available(backend: str) -> bool:
+    """Whether ``backend`` can run here at all: Triton importable, or a C++ compiler on the PATH (whether it builds
+    is known only once it has: :func:`cpp_module`)."""
+    if backend == "triton":
+        return triton is not None
+    from torch.utils.cpp_extension import verify_ninja_availability
+
+    try:
+        verify_ninja_availability()
+    except RuntimeError:
+        return False
+    import shutil
+
+    return shutil.which("c++") is not None or shutil.which("g++") is not None
+
+
+@functools.lru_cache(maxsize=1)
+def cpp_module():
+    """The compiled CPU kernels (built on first use, then loaded from torch's extension cache, which rebuilds when
+    the source or the flags change)."""
+    from torch.utils.cpp_extension import load_inline
+
+    source = (Path(__file__).with_name("hash_cpu.cpp")).read_text()
+    log.info("building the CPU hash-encoding kernel (once per machine; about 20 s)")
+    return load_inline("nerif_hash_cpu", cpp_sources=[source], functions=["hash_forward", "hash_backward"],
+                       extra_cflags=["-O3", "-fopenmp"], extra_ldflags=["-fopenmp"], verbose=False)
 
 
 if triton is not None:
@@ -98,19 +132,24 @@ _BLOCK = 128
 
 
 class FusedHashEncoding(torch.autograd.Function):
-    """(N, 3) positions in [-1, 1]^3 (no gradient) and the table (T, F) -> (N, L F); see the module docstring."""
+    """(N, 3) positions in [-1, 1]^3 (no gradient) and the table (T, F) -> (N, L F) by ``backend``; see the module
+    docstring."""
 
     @staticmethod
     def forward(ctx, x: torch.Tensor, table: torch.Tensor, resolution: torch.Tensor, mask: torch.Tensor,
-                offset: torch.Tensor, mult: torch.Tensor, smooth: bool) -> torch.Tensor:
+                offset: torch.Tensor, mult: torch.Tensor, smooth: bool, backend: str) -> torch.Tensor:
         n, L, F = x.shape[0], resolution.shape[0], table.shape[1]
         x = x.detach().contiguous().float()
-        y = torch.empty(n, L * F, device=x.device, dtype=torch.float32)
-        if n:
-            _forward[(triton.cdiv(n, _BLOCK), L)](x, table.detach().contiguous(), y, resolution, mask, offset,
-                                             mult.contiguous(), n, L, F=F, BLOCK=_BLOCK, SMOOTH=smooth)
+        table, mult = table.detach().contiguous(), mult.contiguous()
+        if backend == "cpp":
+            y = cpp_module().hash_forward(x, table, resolution, mask, offset, mult, smooth)
+        else:
+            y = torch.empty(n, L * F, device=x.device, dtype=torch.float32)
+            if n:
+                _forward[(triton.cdiv(n, _BLOCK), L)](x, table, y, resolution, mask, offset, mult, n, L, F=F,
+                                                      BLOCK=_BLOCK, SMOOTH=smooth)
         ctx.save_for_backward(x, resolution, mask, offset, mult)
-        ctx.table_shape, ctx.smooth = table.shape, smooth
+        ctx.table_shape, ctx.smooth, ctx.backend = table.shape, smooth, backend
         return y
 
     @staticmethod
@@ -118,8 +157,13 @@ class FusedHashEncoding(torch.autograd.Function):
     def backward(ctx, grad_y: torch.Tensor):
         x, resolution, mask, offset, mult = ctx.saved_tensors
         n, L, F = x.shape[0], resolution.shape[0], ctx.table_shape[1]
-        grad_table = torch.zeros(ctx.table_shape, device=x.device, dtype=torch.float32)
-        if n:
-            _backward[(triton.cdiv(n, _BLOCK), L)](x, grad_y.contiguous().float(), grad_table, resolution, mask, offset,
-                                             mult.contiguous(), n, L, F=F, BLOCK=_BLOCK, SMOOTH=ctx.smooth)
-        return None, grad_table, None, None, None, None, None
+        grad_y = grad_y.contiguous().float()
+        if ctx.backend == "cpp":
+            grad_table = cpp_module().hash_backward(x, grad_y, ctx.table_shape[0], resolution, mask, offset, mult,
+                                                    ctx.smooth)
+        else:
+            grad_table = torch.zeros(ctx.table_shape, device=x.device, dtype=torch.float32)
+            if n:
+                _backward[(triton.cdiv(n, _BLOCK), L)](x, grad_y, grad_table, resolution, mask, offset, mult, n, L,
+                                                       F=F, BLOCK=_BLOCK, SMOOTH=ctx.smooth)
+        return None, grad_table, None, None, None, None, None, None
