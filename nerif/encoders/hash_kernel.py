@@ -58,7 +58,7 @@ def cpp_module():
     from torch.utils.cpp_extension import load_inline
 
     source = (Path(__file__).with_name("hash_cpu.cpp")).read_text()
-    log.info("building the CPU hash-encoding kernel (once per machine; about 20 s)")
+    log.info("loading the CPU hash-encoding kernel (compiled on first use, about 20 s; cached after)")
     return load_inline("nerif_hash_cpu", cpp_sources=[source], functions=["hash_forward", "hash_backward"],
                        extra_cflags=["-O3", "-fopenmp"], extra_ldflags=["-fopenmp"], verbose=False)
 
