@@ -127,6 +127,15 @@ def test_kernels_agree_with_the_reference_here(backend):
     hash_module.kernels_agree.cache_clear()
 
 
+def test_a_double_table_takes_the_tensor_path():
+    ref = HashGrid(n_levels=2, max_resolution=32, kernel="torch").double()
+    enc = HashGrid(n_levels=2, max_resolution=32, kernel="cpp" if hash_kernel.available("cpp") else "auto").double()
+    enc.load_state_dict(ref.state_dict())
+    x = torch.rand(20, 3, dtype=torch.float64) * 2 - 1
+    assert enc.backend(x) is None
+    assert enc(x).dtype == torch.float64 and torch.equal(enc(x), ref(x))
+
+
 def test_an_unknown_kernel_is_refused():
     with pytest.raises(ValueError, match="hash kernel must be auto, torch, triton or cpp"):
         HashGrid(kernel="cuda")

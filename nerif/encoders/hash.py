@@ -116,7 +116,7 @@ class HashGrid(nn.Module):
 
     def backend(self, x: torch.Tensor) -> Optional[str]:
         """The fused backend that encodes ``x``, or None for the tensor path (see the class docstring)."""
-        if self.kernel == "torch" or x.requires_grad:
+        if self.kernel == "torch" or x.requires_grad or self.table.dtype != torch.float32:  # kernels: float32 only
             return None
         if self.kernel in hash_kernel.BACKENDS:
             return self.kernel

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import shutil
 from pathlib import Path
 
 import torch
@@ -46,8 +47,6 @@ def available(backend: str) -> bool:
         verify_ninja_availability()
     except RuntimeError:
         return False
-    import shutil
-
     return shutil.which("c++") is not None or shutil.which("g++") is not None
 
 

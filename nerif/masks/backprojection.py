@@ -59,14 +59,14 @@ def box_image(scene, view: int) -> np.ndarray:
     return scene.view_image(view, np.ones(len(scene.dirs[scene.view_slice(view)])), 0.0) > 0
 
 
-def dilation_radius_px(camera, box: ProbeBox, radius_px: int, radius_mm: float) -> int:
+def dilation_radius_px(camera, radius_px: int, radius_mm: float) -> int:
     """The 2-D masks' dilation radius in ``camera``'s pixels: at least ``radius_px`` pixels and at least
     ``radius_mm`` at the probe box's centre. A radius in pixels alone shrinks in the world as the images get finer:
     where the box cuts a flame, the rays along that edge of the box's image cross it over a short chord and deflect
     little, and a strip of them below the threshold then joins the flame's open core to the background on two sides,
     so that :func:`fill_holes` no longer fills it and the visual hull carves the flame (Phantom 5 at 1 mm, 2 x 2
     binning: 36 % of the flame carved away with 2 px, none with 2.3 mm)."""
-    scale = camera.pixels_per_mm(box.centres().reshape(-1, 3).mean(0))
+    scale = camera.pixels_per_mm(np.zeros(3))  # the probe box is centred on the world origin
     return max(int(radius_px), int(round(radius_mm * scale)))
 
 
@@ -90,7 +90,7 @@ def deflection_masks(scene, threshold: float = 0.001, radius_px: int = 2, noise_
         signal = peak > 0 and np.isfinite(peak)
         keep = (mag2 > threshold * peak) & (mag2 > floor) if signal else np.zeros(len(eps), bool)
         m = (scene.view_image(v, keep.astype(np.float64)) > 0).astype(np.uint8)
-        r = dilation_radius_px(cam, scene.box, radius_px, radius_mm)
+        r = dilation_radius_px(cam, radius_px, radius_mm)
         if r > 0:
             disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
             m = cv2.dilate(m, disc)
