@@ -12,17 +12,22 @@ from __future__ import annotations
 
 import argparse
 import platform
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from nerif.app import resolve_device, resolve_threads
 from nerif.configs import compose, group
 from nerif.data import DATASETS
-from nerif.io.export import atomic_write, write_json
 from nerif.masks import MASKS
 from nerif.solvers import SOLVERS
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from ablation import write_report  # noqa: E402
 
 
 def synchronize(device: torch.device) -> None:
@@ -66,7 +71,8 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     base = compose(args.set)
-    device = torch.device(base.device if base.device != "auto" else ("cuda" if torch.cuda.is_available() else "cpu"))
+    device = resolve_device(base.device)
+    torch.set_num_threads(resolve_threads(base.threads))  # as python -m nerif
     t0 = time.perf_counter()
     scene = DATASETS.build(group(base, "data"), device=str(device))
     print(f"scene: {len(scene.dirs)} rays, built in {time.perf_counter() - t0:.1f} s", flush=True)
@@ -99,10 +105,8 @@ def main() -> None:
         mem = "-" if r["peak_memory_gib"] is None else f"{r['peak_memory_gib']:.2f}"
         lines.append(f"| {name} | {r['ms_per_iteration']:.2f} | {r['ms_p10']:.2f} | {r['ms_p90']:.2f} | {mem} | "
                      f"{r['samples_per_ray']:.1f} |")
-    text = "\n".join(lines) + "\n"
-    atomic_write(out / "step_profile.md", lambda t: Path(t).write_text(text))
-    write_json({"settings": args.set, "device": str(device), "variants": rows}, out / "step_profile.json")
-    print(text)
+    write_report(out, "step_profile", {"settings": args.set, "device": str(device), "variants": rows},
+                 "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":
