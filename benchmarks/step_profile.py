@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from nerif.app import resolve_device, resolve_threads
+from nerif.app import resolve_device, resolve_threads, retain_freed_memory
 from nerif.configs import compose, group
 from nerif.data import DATASETS
 from nerif.masks import MASKS
@@ -73,6 +73,7 @@ def main() -> None:
     base = compose(args.set)
     device = resolve_device(base.device)
     torch.set_num_threads(resolve_threads(base.threads))  # as python -m nerif
+    retain_freed_memory()
     t0 = time.perf_counter()
     scene = DATASETS.build(group(base, "data"), device=str(device))
     print(f"scene: {len(scene.dirs)} rays, built in {time.perf_counter() - t0:.1f} s", flush=True)

@@ -6,6 +6,7 @@ from typing import Callable, Optional
 
 import torch
 from torch import nn
+from torch.optim.swa_utils import AveragedModel
 
 from nerif.geometry import ProbeBox
 
@@ -38,7 +39,7 @@ class NeuralField(nn.Module):
             lin = nn.Linear(width, h)
             nn.init.kaiming_uniform_(lin.weight, a=0.01, nonlinearity="leaky_relu")
             nn.init.zeros_(lin.bias)
-            layers += [lin, nn.LeakyReLU(0.01)]
+            layers += [lin, nn.LeakyReLU(0.01, inplace=True)]  # on the product, which its backward does not need
             width = h
         last = nn.Linear(width, 1)
         nn.init.zeros_(last.weight)
@@ -88,6 +89,27 @@ def fit_to_volume(field: NeuralField, box: ProbeBox, sigma: torch.Tensor, iterat
         opt.step()
     with torch.no_grad():
         return float((field.on_grid(box).reshape(-1) - target).square().mean().sqrt())
+
+
+def averaged_field(field: NeuralField, decay: float) -> AveragedModel:
+    """An exponential moving average of ``field``'s weights (Polyak averaging), updated by
+    ``average.update_parameters(field)`` after each optimiser step and evaluated as ``average.module``.
+
+    After n updates the average moves towards the new weights by ``1 - min(decay, (1 + n) / (10 + n))`` (the first
+    update copies them): a short memory at the start, where the weights change fast, ``decay`` once they settle
+    (1 / (1 - decay) steps). Training is unchanged; the average removes the step-to-step jitter of the weights that
+    a high learning rate leaves, so the field it holds is the better estimate long before the rate anneals.
+    Buffers (hash-level constants) and the 3-D gate are copied, not averaged.
+    """
+    if not 0.0 < decay < 1.0:
+        raise ValueError(f"an average's decay must be within (0, 1), got {decay}")
+
+    @torch.no_grad()
+    def ema(averaged: list[torch.Tensor], current: list[torch.Tensor], n: torch.Tensor) -> None:
+        n = int(n)
+        torch._foreach_lerp_(averaged, current, 1.0 - min(decay, (1.0 + n) / (10.0 + n)))
+
+    return AveragedModel(field, multi_avg_fn=ema, use_buffers=False)
 
 
 DEFAULT_PRIOR = (-1.05, 0.05)  # hot gas in cooler ambient: sigma from -1 (T_max) to slightly above 0

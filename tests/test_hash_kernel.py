@@ -44,10 +44,16 @@ def test_fused_matches_reference(case, interpolation, backend):
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-def test_one_feature_and_no_points(backend):
-    ref, fused = encoders(CASES[1], "linear", backend, n_features=1)
+@pytest.mark.parametrize("n_features", [1, 3, 4])  # the cpp kernel: compiled for 1, 2 and 4, any other count (3)
+def test_other_feature_counts_and_no_points(backend, n_features):
+    ref, fused = encoders(CASES[1], "linear", backend, n_features=n_features)
     x = torch.rand(50, 3) * 2 - 1
-    assert torch.allclose(fused(x), ref(x), rtol=1e-5, atol=1e-6)
+    y = fused(x)
+    assert torch.allclose(y, ref(x), rtol=1e-5, atol=1e-6)
+    g = torch.randn_like(y)
+    (grad_ref,) = torch.autograd.grad(ref(x), ref.table, g)
+    (grad,) = torch.autograd.grad(y, fused.table, g)
+    assert torch.allclose(grad, grad_ref, rtol=1e-5, atol=1e-6)
     empty = fused(torch.zeros(0, 3))
     assert empty.shape == (0, ref.out_dim)
     empty.sum().backward()

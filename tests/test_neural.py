@@ -37,6 +37,9 @@ def test_resuming_a_checkpoint_continues_exactly(tmp_path):
         resumed.step()
     for a, b in zip(straight.field.parameters(), resumed.field.parameters()):
         torch.testing.assert_close(a, b)
+    assert int(resumed.average.n_averaged) == 12
+    for a, b in zip(straight.average.parameters(), resumed.average.parameters()):
+        torch.testing.assert_close(a, b)
 
 
 def test_a_diverging_run_stops_and_keeps_the_last_good_checkpoint(tmp_path):
@@ -89,6 +92,7 @@ def test_no_second_order_graph_when_only_the_discrete_term_trains(monkeypatch):
     ("loss.ambient_fallback=auto", "loss.ambient_fallback must be a list of faces"),
     ("grad.stencil=diagonal", "grad.stencil must be 'axes' or 'across'"),
     ("train.table_decay=-1", "a decay rate of at least 0"),
+    ("train.ema_decay=1", "a decay within"),
     ("train.init_volume=/nonexistent/reconstruction.npz", "volume file .* does not exist"),
 ])
 def test_settings_are_checked_before_any_data(override, message):
@@ -239,3 +243,32 @@ def test_the_field_evaluations_per_sample_follow_the_operators_and_the_stencil(o
     tr = neural_solver(*overrides)
     tr.scene = replace(tr.scene, perpendicular_only=perpendicular)
     assert tr.timing()["field_evaluations_per_sample"] == expected
+
+
+def test_outputs_use_the_moving_average_of_the_trained_weights():
+    """After n steps the reconstruction is the field whose weights are sum_k c_k w_k over the trained weights w_k of
+    each step, c_k = (1 - d_k) prod_{j > k} d_j with d_k = min(decay, k / (9 + k)) and d_1 = 0 (the first step's
+    weights are copied); with ``train.ema_decay=0`` it is the trained field's own."""
+    decay = 0.3
+    tr = neural_solver(f"train.ema_decay={decay}")
+    assert torch.equal(torch.as_tensor(tr.reconstruction()), torch.as_tensor(tr.field.on_grid(tr.scene.box).double()))
+    iterates = []
+    for _ in range(6):
+        tr.step()
+        iterates.append([p.detach().clone() for p in tr.field.parameters()])
+    d = [0.0] + [min(decay, k / (9 + k)) for k in range(2, 7)]
+    c = [(1 - d[k]) * float(np.prod(d[k + 1:])) for k in range(6)]
+    assert abs(sum(c) - 1) < 1e-12 and d[1] < decay == d[5]  # both regimes
+    expected = [sum(ck * w[i] for ck, w in zip(c, iterates)) for i in range(len(iterates[0]))]
+    for a, e in zip(tr.average.module.parameters(), expected):
+        torch.testing.assert_close(a, e)
+    with torch.no_grad():
+        for p, e in zip(tr.field.parameters(), expected):
+            p.copy_(e)
+    np.testing.assert_allclose(tr.reconstruction(), tr.field.on_grid(tr.scene.box).double().numpy(), atol=1e-6)
+    assert not torch.equal(iterates[-1][0], expected[0])  # the average is not the last weights
+
+    last = neural_solver("train.ema_decay=0")
+    last.step()
+    assert last.average is None
+    np.testing.assert_array_equal(last.reconstruction(), last.field.on_grid(last.scene.box).double().numpy())

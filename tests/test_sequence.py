@@ -77,8 +77,8 @@ def test_cold_starts_and_bad_settings(tmp_path):
 
 
 def test_a_warm_frame_starts_from_the_previous_frame_s_field(series):
-    """The second frame's solver holds the first frame's final weights, and its first loss is far below a cold
-    start's (the initial field is ambient: the loss is the data's own size)."""
+    """The second frame's solver holds the first frame's result (its averaged weights), and its first loss is far
+    below a cold start's (the initial field is ambient: the loss is the data's own size)."""
     out = series[0]
     cfg = series_config()
     scene = DATASETS.build(group(cfg, "data"), frame=1)
@@ -86,8 +86,9 @@ def test_a_warm_frame_starts_from_the_previous_frame_s_field(series):
     warm, cold = solver(cfg, scene, masks), solver(cfg, scene, masks)
     previous = torch.load(out / "frame_0000" / "checkpoint.pt", weights_only=False)
     warm.start_from(out / "frame_0000" / "checkpoint.pt")
+    assert int(previous["average"]["n_averaged"]) > 0 and int(warm.average.n_averaged) == 0  # a fresh average
     for k, v in warm.field.state_dict().items():
-        assert torch.equal(v, previous["field"][k]), k
+        assert torch.equal(v, previous["average"]["module." + k]), k
     assert warm.iteration == 0 and not warm.optimizer.state  # a fresh optimiser
     assert warm.step()["loss"] < 0.3 * cold.step()["loss"]
 

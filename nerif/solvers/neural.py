@@ -14,7 +14,7 @@ import torch
 from nerif.data import Scene
 from nerif.encoders import ENCODERS
 from nerif.data.phantoms import read_volume
-from nerif.field import NeuralField, fit_to_volume, prior_interval
+from nerif.field import NeuralField, averaged_field, fit_to_volume, prior_interval
 from nerif.losses import AmbientBoundary, TotalVariation, deflection_terms, weighted_sum
 from nerif.metrics import deflection_rmse
 from nerif.renderers import SAMPLERS, render_deflections
@@ -48,6 +48,8 @@ class NeuralSolver(IterativeSolver):
             encoder's parameters by ``1 - lr table_decay`` (AdamW), so that table entries no ray constrains fade
             to zero instead of wandering under Adam's normalised steps. ``init_volume``: a ``reconstruction.npz``
             on this probe grid that the field is first fit to (``init_iterations``; :func:`nerif.field.fit_to_volume`).
+            ``ema_decay``: evaluations and outputs use an exponential moving average of the trained weights
+            (:func:`nerif.field.averaged_field`; 0: the last weights), training itself is unchanged.
         metrics, seed, label: see :class:`IterativeSolver`.
     """
 
@@ -87,6 +89,9 @@ class NeuralSolver(IterativeSolver):
         self.hidden, self.prior = tuple(field["hidden"]), field["prior"]
         self.table_decay = float(train["table_decay"])
         self.init_volume, self.init_iterations = train["init_volume"], int(train["init_iterations"])
+        self.ema_decay = float(train["ema_decay"])
+        if not 0.0 <= self.ema_decay < 1.0:
+            raise ValueError(f"train.ema_decay={self.ema_decay}: a decay within [0, 1) (0: no average)")
         if self.table_decay < 0:
             raise ValueError(f"train.table_decay={self.table_decay}: a decay rate of at least 0")
         if self.init_volume is not None and not Path(self.init_volume).expanduser().is_file():
@@ -124,6 +129,7 @@ class NeuralSolver(IterativeSolver):
         self.generator = torch.Generator(self.device).manual_seed(self.seed)
         if self.init_volume is not None:
             self._warm_start(self.init_volume)
+        self.average = averaged_field(self.field, self.ema_decay) if self.ema_decay > 0 else None
         # central-difference step: b_min / (2 K), K the most samples per ray
         self.step_mm = scene.box.shortest_side_mm / (2 * self.sampler.samples_per_ray)
         self.scale = scene.ambient.delta_thre  # rad per unit of sigma deflection
@@ -260,6 +266,8 @@ class NeuralSolver(IterativeSolver):
         if not math.isfinite(out["loss"]):  # the step that made it is never saved: fit keeps the last checkpoint
             raise DivergenceError(f"the loss became {out['loss']} at iteration {self.iteration}: the run diverged "
                                   "(try a lower train.lr)")
+        if self.average is not None:
+            self.average.update_parameters(self.field)
         self._timed(time.perf_counter() - t0)
         self.samples_seen += len(samples.positions)
         self.rays_seen += samples.n_rays
@@ -271,13 +279,17 @@ class NeuralSolver(IterativeSolver):
         return out
 
     # --- evaluation ---
+    @property
+    def estimate(self) -> NeuralField:
+        """The field that evaluations and outputs use: the average of the trained weights (``train.ema_decay``)
+        once a step has updated it, else the trained field itself."""
+        if self.average is None or int(self.average.n_averaged) == 0:
+            return self.field
+        return self.average.module
+
     def reconstruction(self) -> np.ndarray:
         """sigma on the scene's probe grid, (nx, ny, nz)."""
-        was = self.field.training
-        self.field.eval()
-        sigma = self.field.on_grid(self.scene.box).cpu().numpy().astype(np.float64)
-        self.field.train(was)
-        return sigma
+        return self.estimate.on_grid(self.scene.box).cpu().numpy().astype(np.float64)
 
     def render(self, o: torch.Tensor, d: torch.Tensor, operators=("auto", "discrete")) -> dict:
         """Deflections [rad] of rays (R, 3) by each operator, without any parameter graph."""
@@ -285,7 +297,7 @@ class NeuralSolver(IterativeSolver):
         chunk = max(1, min(4096, (1 << 18) // self._eval_sampler.samples_per_ray))  # rays per pass: bounded memory
         for i in range(0, len(d), chunk):
             s = self._eval_sampler(self.scene.box, o[i:i + chunk], d[i:i + chunk])
-            eps = render_deflections(self.field, s, {n: False for n in operators}, self.step_mm,
+            eps = render_deflections(self.estimate, s, {n: False for n in operators}, self.step_mm,
                                      dirs=self._measured(d[i:i + chunk]), stencil=self.stencil)
             for n in operators:
                 out[n].append(eps[n].detach() * self.scale)
@@ -337,25 +349,32 @@ class NeuralSolver(IterativeSolver):
     # --- checkpoints ---
     def state_dict(self) -> dict:
         return {**super().state_dict(), "field": self.field.state_dict(), "optimizer": self.optimizer.state_dict(),
+                "average": None if self.average is None else self.average.state_dict(),
                 "sampler": self.sampler.state_dict(), "scheduler": self.scheduler.state_dict(),
                 "generator": self.generator.get_state(), "samples_seen": self.samples_seen, "rays_seen": self.rays_seen,
                 "samples_max": self.samples_max, "rays_skipped": self.rays_skipped, "converged": self.converged}
 
-    def _load_field(self, st: dict) -> None:
+    def _load_field(self, st: dict, weights: Optional[dict] = None) -> None:
         try:
-            self.field.load_state_dict(st["field"])
+            self.field.load_state_dict(st["field"] if weights is None else weights)
         except RuntimeError as e:
             raise ValueError("the checkpoint was made with another field configuration (encoder/field settings "
                              f"differ): {str(e).splitlines()[0]}") from None
         self.sampler.load_state_dict(st.get("sampler", {}))
 
     def start_from(self, path: Path) -> None:
-        """The field's weights and the occupancy grid of ``path`` (a checkpoint of the previous frame); the
-        optimiser, its schedule and the counters start afresh. The 3-D mask stays this frame's own."""
+        """The previous frame's result (its averaged weights, or its trained ones when it kept no average) and
+        occupancy grid, from ``path`` (that frame's checkpoint); the optimiser, its schedule, the average and the
+        counters start afresh. The 3-D mask stays this frame's own."""
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"the previous frame's checkpoint {path} does not exist")
-        self._load_field(torch.load(path, map_location=self.device, weights_only=False))
+        st = torch.load(path, map_location=self.device, weights_only=False)
+        average = st.get("average")
+        weights = None
+        if average is not None and int(average["n_averaged"]) > 0:
+            weights = {k[len("module."):]: v for k, v in average.items() if k.startswith("module.")}
+        self._load_field(st, weights)
 
     def load_state_dict(self, st: dict) -> None:
         self._load_field(st)
@@ -365,6 +384,11 @@ class NeuralSolver(IterativeSolver):
             raise ValueError("the checkpoint's optimiser state does not fit this solver (made by a nerif before "
                              f"train.table_decay, or with another encoder): {str(e).splitlines()[0]}") from None
         self.scheduler.load_state_dict(st["scheduler"])
+        if self.average is not None:
+            if st.get("average") is not None:
+                self.average.load_state_dict(st["average"])
+            else:  # a checkpoint without an average: it starts again from the next step's weights
+                self.average.n_averaged.zero_()
         self.generator.set_state(st["generator"].cpu() if self.device.type == "cpu" else st["generator"])
         super().load_state_dict(st)
         for k in ("samples_seen", "rays_seen", "samples_max", "rays_skipped"):
