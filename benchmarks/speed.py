@@ -27,6 +27,7 @@ import sys
 import tempfile
 from contextlib import ExitStack
 from pathlib import Path
+from typing import Optional
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -53,7 +54,8 @@ def table(rows: dict[str, dict]) -> str:
         reach = ["-" if r[f"time_to_{t:g}K_s"] is None else f"{r[f'time_to_{t:g}K_s']:.0f}" for t in TARGETS_K]
         lines.append(f"| {name} | {r['ms_per_iteration']:.1f} | {r['samples_per_second']:.3g} | "
                      f"{r['field_evaluations_per_second']:.3g} | " + " | ".join(reach) +
-                     f" | {r['temperature_rmse_K']:.1f} | {r['peak_memory_gib']:.2f} |")
+                     f" | {r['temperature_rmse_K']:.1f} | " +
+                     ("-" if r["peak_memory_gib"] is None else f"{r['peak_memory_gib']:.2f}") + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -63,6 +65,8 @@ def ratios(rows: dict[str, dict], variants: list[str], refs: list[str]) -> str:
     lines = ["| " + " | ".join(heads) + " |", "|---" * len(heads) + "|"]
     for name in variants:
         for ref in refs:
+            if f"{name} @ {ref}" not in rows:
+                continue
             a, b = rows[name], rows[f"{name} @ {ref}"]
             cells = []
             for t in TARGETS_K:
@@ -90,9 +94,10 @@ def checkout(ref: str, stack: ExitStack) -> Path:
     return folder
 
 
-def run_elsewhere(tree: Path, cell: str, settings: list[str], folder: Path, resume: bool) -> dict:
+def run_elsewhere(tree: Path, cell: str, settings: list[str], folder: Path, resume: bool) -> Optional[dict]:
     """One cell run by the code and configs of another checkout (``python -m nerif`` there, in a subprocess
-    with the same threads); its ``metrics.json``."""
+    with the same threads); its ``metrics.json``, or None (with one line saying why) when that checkout cannot run
+    it (an older one may lack the cell's settings): the other rows are still reported."""
     metrics = folder / "metrics.json"
     if not (resume and metrics.is_file()):
         env = {**os.environ, "PYTHONPATH": str(tree)}
@@ -100,10 +105,13 @@ def run_elsewhere(tree: Path, cell: str, settings: list[str], folder: Path, resu
                *settings, *cell.split()]
         done = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True)
         if done.returncode or not metrics.is_file():
-            raise SystemExit(f"{tree}: {' '.join(cmd[2:])} failed:\n{done.stderr[-2000:]}")
-    m = json.loads(metrics.read_text())
-    m.setdefault("peak_memory_gib", resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20)  # so far
-    return m
+            why = next((line for line in done.stderr.splitlines() if line.strip()), "no metrics.json")
+            print(f"{tree}: {' '.join(cmd[2:])} failed: {why}", flush=True)
+            return None
+        m = json.loads(metrics.read_text())
+        m.setdefault("peak_memory_gib", resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20)  # so far
+        return m
+    return json.loads(metrics.read_text())  # read back: its memory was not measured here
 
 
 def main(argv=None) -> dict:
@@ -119,6 +127,7 @@ def main(argv=None) -> dict:
     settings = ["train.eval_every=100"] + args.set
     cells = [VARIANTS[v] or "seed=0" for v in args.variants]
     names = list(args.variants)
+    failed = []  # cells another checkout could not run
     with ExitStack() as stack:
         trees = {ref: checkout(ref, stack) for ref in args.against}  # a bad ref fails before any run
         table_rows = run_cells(cells, settings, out, resume=args.resume)
@@ -126,6 +135,9 @@ def main(argv=None) -> dict:
             for i, (name, cell) in enumerate(zip(args.variants, cells)):
                 folder = out / f"against_{Path(ref).name or ref}_{i}"
                 m = run_elsewhere(tree, cell, settings, folder, args.resume)
+                if m is None:
+                    failed.append(f"{name} @ {ref}")
+                    continue
                 table_rows.append({**m, "config": cell})
                 names.append(f"{name} @ {ref}")
                 print(f"{name} @ {ref}: {m['temperature_rmse_K']:.1f} K, {m['ms_per_iteration']:.1f} ms/it", flush=True)
@@ -136,17 +148,20 @@ def main(argv=None) -> dict:
         rows[name] = {**{k: r.get(k) for k in ("ms_per_iteration", "samples_per_second", "temperature_rmse_K",
                                                "wall_time_s", "device")},
                       "field_evaluations_per_second": per_sample * r["samples_per_second"],
-                      "peak_memory_gib": r.get("gpu_peak_memory_gib", r.get("peak_memory_gib",
-                                               resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20)),
+                      "peak_memory_gib": r.get("gpu_peak_memory_gib", r.get("peak_memory_gib")),
                       **{f"time_to_{t:g}K_s": time_to(r["history"], t) for t in TARGETS_K},
                       "history": r["history"]}
     text = f"Time to accuracy, {header(settings, table_rows)}\n\n{table(rows)}"
     if args.against:
         text += "\n" + ratios(rows, args.variants, args.against)
-    text += ("\nPeak memory on the CPU is the process's maximum resident set so far (the largest variant up to "
-             "that row; for another checkout's rows, the largest of its subprocesses so far); on a GPU, the run's "
-             "own peak allocation.\n")
-    write_report(out, "speed", {"settings": settings, "rows": rows}, text)
+    if failed:
+        text += "\nNot run (that checkout refused the cell's settings): " + ", ".join(failed) + ".\n"
+    text += ("\nPeak memory: on a GPU, the run's own peak allocation; on the CPU, for another checkout's rows the "
+             "largest resident set of its subprocesses so far ('-' when read back by --resume), and this checkout's "
+             "variants share one process, " + ("whose memory a --resume run does not measure.\n" if args.resume else
+                                               "whose peak resident set was "
+                                               f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GiB.\n"))
+    write_report(out, "speed", {"settings": settings, "rows": rows, "not_run": failed}, text)
     return rows
 
 

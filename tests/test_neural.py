@@ -42,6 +42,23 @@ def test_resuming_a_checkpoint_continues_exactly(tmp_path):
         torch.testing.assert_close(a, b)
 
 
+def test_a_checkpoint_without_an_average_resumes_and_averages_from_the_next_step(tmp_path):
+    """A checkpoint of a nerif before ``train.ema_decay`` holds no average: the run resumes, its outputs are the
+    trained field's until the next step, whose weights the average then starts from."""
+    tr = neural_solver()
+    for _ in range(3):
+        tr.step()
+    st = tr.state_dict()
+    del st["average"]
+    torch.save(st, tmp_path / "old.pt")
+    resumed = neural_solver()
+    resumed.load(tmp_path / "old.pt")
+    assert int(resumed.average.n_averaged) == 0 and resumed.estimate is resumed.field
+    resumed.step()
+    for a, b in zip(resumed.average.module.parameters(), resumed.field.parameters()):
+        assert torch.equal(a, b)
+
+
 def test_a_diverging_run_stops_and_keeps_the_last_good_checkpoint(tmp_path):
     tr = neural_solver()
     for _ in range(5):
