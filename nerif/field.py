@@ -91,15 +91,17 @@ def fit_to_volume(field: NeuralField, box: ProbeBox, sigma: torch.Tensor, iterat
         return float((field.on_grid(box).reshape(-1) - target).square().mean().sqrt())
 
 
-def averaged_field(field: NeuralField, decay: float) -> AveragedModel:
+def averaged_field(field: NeuralField, decay: float, rate: Optional[Callable[[], float]] = None) -> AveragedModel:
     """An exponential moving average of ``field``'s weights (Polyak averaging), updated by
     ``average.update_parameters(field)`` after each optimiser step and evaluated as ``average.module``.
 
-    After n updates the average moves towards the new weights by ``1 - min(decay, (1 + n) / (10 + n))`` (the first
-    update copies them): a short memory at the start, where the weights change fast, ``decay`` once they settle
-    (1 / (1 - decay) steps). Training is unchanged; the average removes the step-to-step jitter of the weights that
-    a high learning rate leaves, so the field it holds is the better estimate long before the rate anneals.
-    Buffers (hash-level constants) and the 3-D gate are copied, not averaged.
+    Each update moves the average towards the new weights by ``1 - d``. Its memory, ``1 / (1 - d)`` steps, is
+    ``1 / (1 - decay)`` (50 at 0.98), shortened at the start (``d <= (1 + n) / (10 + n)`` after n updates: the
+    first update copies the weights, the next follow the fast early steps) and, with ``rate`` (the learning rate
+    now over its peak), in proportion to the rate once it is below half its peak: the jitter the average removes
+    scales with the rate, while its lag behind weights that still move does not, so the average ends on the last
+    weights as the rate anneals. Training is unchanged. Buffers (hash-level constants) and the 3-D gate are
+    copied, not averaged.
     """
     if not 0.0 < decay < 1.0:
         raise ValueError(f"an average's decay must be within (0, 1), got {decay}")
@@ -107,7 +109,10 @@ def averaged_field(field: NeuralField, decay: float) -> AveragedModel:
     @torch.no_grad()
     def ema(averaged: list[torch.Tensor], current: list[torch.Tensor], n: torch.Tensor) -> None:
         n = int(n)
-        torch._foreach_lerp_(averaged, current, 1.0 - min(decay, (1.0 + n) / (10.0 + n)))
+        d = min(decay, (1.0 + n) / (10.0 + n))
+        if rate is not None:
+            d = min(d, max(0.0, 1.0 - (1.0 - decay) / max(min(1.0, 2.0 * rate()), 1e-12)))
+        torch._foreach_lerp_(averaged, current, 1.0 - d)
 
     return AveragedModel(field, multi_avg_fn=ema, use_buffers=False)
 

@@ -265,7 +265,8 @@ def test_the_field_evaluations_per_sample_follow_the_operators_and_the_stencil(o
 def test_outputs_use_the_moving_average_of_the_trained_weights():
     """After n steps the reconstruction is the field whose weights are sum_k c_k w_k over the trained weights w_k of
     each step, c_k = (1 - d_k) prod_{j > k} d_j with d_k = min(decay, k / (9 + k)) and d_1 = 0 (the first step's
-    weights are copied); with ``train.ema_decay=0`` it is the trained field's own."""
+    weights are copied; the learning rate is still above half its peak); once the rate has annealed, the last
+    weights; with ``train.ema_decay=0`` the trained field's own."""
     decay = 0.3
     tr = neural_solver(f"train.ema_decay={decay}")
     assert torch.equal(torch.as_tensor(tr.reconstruction()), torch.as_tensor(tr.field.on_grid(tr.scene.box).double()))
@@ -284,6 +285,13 @@ def test_outputs_use_the_moving_average_of_the_trained_weights():
             p.copy_(e)
     np.testing.assert_allclose(tr.reconstruction(), tr.field.on_grid(tr.scene.box).double().numpy(), atol=1e-6)
     assert not torch.equal(iterates[-1][0], expected[0])  # the average is not the last weights
+
+    ended = neural_solver("train.iterations=8")  # the rate anneals to lr_min: the average ends on the last weights
+    for _ in range(8):
+        ended.step()
+    assert ended.rate() < 1e-3
+    for a, b in zip(ended.average.module.parameters(), ended.field.parameters()):
+        assert torch.equal(a, b)
 
     last = neural_solver("train.ema_decay=0")
     last.step()

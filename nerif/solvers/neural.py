@@ -129,7 +129,7 @@ class NeuralSolver(IterativeSolver):
         self.generator = torch.Generator(self.device).manual_seed(self.seed)
         if self.init_volume is not None:
             self._warm_start(self.init_volume)
-        self.average = averaged_field(self.field, self.ema_decay) if self.ema_decay > 0 else None
+        self.average = averaged_field(self.field, self.ema_decay, self.rate) if self.ema_decay > 0 else None
         # central-difference step: b_min / (2 K), K the most samples per ray
         self.step_mm = scene.box.shortest_side_mm / (2 * self.sampler.samples_per_ray)
         self.scale = scene.ambient.delta_thre  # rad per unit of sigma deflection
@@ -277,6 +277,10 @@ class NeuralSolver(IterativeSolver):
                    samples_per_ray=len(samples.positions) / max(samples.n_rays, 1),
                    rays_skipped=stats[-1] / max(samples.n_rays, 1))
         return out
+
+    def rate(self) -> float:
+        """The learning rate of the next step over its peak (``train.lr``), from 1 down to ``lr_min / lr``."""
+        return self.optimizer.param_groups[0]["lr"] / self.scheduler.base_lrs[0]
 
     # --- evaluation ---
     @property
