@@ -299,9 +299,10 @@ class NeuralSolver(IterativeSolver):
         """Deflections [rad] of rays (R, 3) by each operator, without any parameter graph."""
         out = {n: [] for n in operators}
         chunk = max(1, min(4096, (1 << 18) // self._eval_sampler.samples_per_ray))  # rays per pass: bounded memory
+        field = self.estimate
         for i in range(0, len(d), chunk):
             s = self._eval_sampler(self.scene.box, o[i:i + chunk], d[i:i + chunk])
-            eps = render_deflections(self.estimate, s, {n: False for n in operators}, self.step_mm,
+            eps = render_deflections(field, s, {n: False for n in operators}, self.step_mm,
                                      dirs=self._measured(d[i:i + chunk]), stencil=self.stencil)
             for n in operators:
                 out[n].append(eps[n].detach() * self.scale)
