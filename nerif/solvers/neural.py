@@ -108,6 +108,8 @@ class NeuralSolver(IterativeSolver):
         self._check_truth_within(prior)
         self.field = NeuralField(self.encoder, scene.box, hidden=self.hidden, prior=prior, gate=masks.gate)
         self.field.to(self.device)
+        with torch.no_grad():  # builds (first run on a machine) or loads the encoder's compiled kernels now, in setup
+            self.field.network(torch.zeros(1, 3, device=self.device))
         lc = self.loss_cfg
         faces = self.resolve_ambient_faces(lc["ambient_faces"], masks, lc["crossed_cover"], lc["ambient_fallback"])
         b = AmbientBoundary(scene.box, faces, lc["ambient_weight"], lc["ambient_points"])
