@@ -105,7 +105,8 @@ def run_elsewhere(tree: Path, cell: str, settings: list[str], folder: Path, resu
                *settings, *cell.split()]
         done = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True)
         if done.returncode or not metrics.is_file():
-            why = next((line for line in done.stderr.splitlines() if line.strip()), "no metrics.json")
+            lines = [line.strip() for line in done.stderr.splitlines() if line.strip()] or ["no metrics.json"]
+            why = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"  # Hydra's sentence, or the error
             print(f"{tree}: {' '.join(cmd[2:])} failed: {why}", flush=True)
             return None
         m = json.loads(metrics.read_text())
@@ -155,7 +156,7 @@ def main(argv=None) -> dict:
     if args.against:
         text += "\n" + ratios(rows, args.variants, args.against)
     if failed:
-        text += "\nNot run (that checkout refused the cell's settings): " + ", ".join(failed) + ".\n"
+        text += "\nNot run (that checkout's run failed, the reason printed above): " + ", ".join(failed) + ".\n"
     text += ("\nPeak memory: on a GPU, the run's own peak allocation; on the CPU, for another checkout's rows the "
              "largest resident set of its subprocesses so far ('-' when read back by --resume), and this checkout's "
              "variants share one process, " + ("whose memory a --resume run does not measure.\n" if args.resume else

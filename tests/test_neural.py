@@ -277,6 +277,7 @@ def test_outputs_use_the_moving_average_of_the_trained_weights():
     d = [0.0] + [min(decay, k / (9 + k)) for k in range(2, 7)]
     c = [(1 - d[k]) * float(np.prod(d[k + 1:])) for k in range(6)]
     assert abs(sum(c) - 1) < 1e-12 and d[1] < decay == d[5]  # both regimes
+    assert tr.rate() > 0.5  # so the window is not yet shortened by the rate
     expected = [sum(ck * w[i] for ck, w in zip(c, iterates)) for i in range(len(iterates[0]))]
     for a, e in zip(tr.average.module.parameters(), expected):
         torch.testing.assert_close(a, e)
