@@ -6,13 +6,14 @@ Where: ``data.cache_dir`` (default ``$NERIF_CACHE``, else ``~/.cache/nerif``). B
 """
 from __future__ import annotations
 
+import ast
 import functools
 import hashlib
 import json
 import logging
 import os
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -20,18 +21,67 @@ from nerif.io.export import write_npz
 
 log = logging.getLogger(__name__)
 DEFAULT_MAX_MB = 2048.0
-# the source files (in the nerif package) whose code decides what a cached array holds; read, not imported
-FORWARD_MODEL = ("physics.py", "geometry/box.py", "geometry/camera.py", "geometry/rays.py", "data/phantoms.py",
-                 "data/scene.py", "renderers/voxel.py", "sensing/models.py", "sensing/realistic.py", "sensing/optics.py",
-                 "sensing/imaging.py", "sensing/patterns.py", "sensing/flow.py", "sensing/displacement.py")
+# the modules whose code decides what a cached array holds: the forward model is their import closure
+FORWARD_MODEL_ROOTS = ("nerif.data.synthetic", "nerif.sensing.realistic")
+_TOP = Path(__file__).resolve().parent  # the nerif package
 
 
-@functools.lru_cache(maxsize=1)
-def forward_model_version() -> str:
-    """A digest of the forward model's source files: any change to them makes new cache entries."""
+def module_file(name: str, top: Path = _TOP) -> Optional[Path]:
+    """The source file of module ``name`` (``nerif.a.b``) in the package folder ``top``: ``a/b.py`` or
+    ``a/b/__init__.py``; None for a name that is no module there (an attribute imported from a package)."""
+    parts = name.split(".")[1:]
+    for path in (top.joinpath(*parts).with_suffix(".py") if parts else None, top.joinpath(*parts, "__init__.py")):
+        if path is not None and path.is_file():
+            return path
+    return None
+
+
+def _imported(path: Path, top: Path) -> set[str]:
+    """Every ``nerif...`` module a source file runs, read, not run: what it imports (at its top or inside a
+    function; ``from nerif.a import b`` names ``nerif.a`` and ``nerif.a.b``, b may be a module) and, for a
+    :class:`nerif.registry.Registry` it defines, every module of the registry's package (a registry imports them
+    all when a name is first looked up)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").split(".")[0] == "nerif":
+            names.add(node.module)
+            names.update(f"{node.module}.{a.name}" for a in node.names)
+        elif isinstance(node, ast.Import):
+            names.update(a.name for a in node.names if a.name.split(".")[0] == "nerif")
+        elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "Registry":
+            for kw in node.keywords:
+                if kw.arg == "package" and isinstance(kw.value, ast.Constant):
+                    package = module_file(kw.value.value, top)
+                    names.update(f"{kw.value.value}.{p.stem}" for p in package.parent.glob("*.py"))
+    return names
+
+
+def import_closure(roots: Sequence[str], top: Path = _TOP) -> list[Path]:
+    """The source files that the modules ``roots`` run (:func:`_imported`, recursively, with the
+    ``__init__.py`` of every package on the way), as sorted paths in ``top``, the package folder."""
+    seen: set[Path] = set()
+    todo = list(roots)
+    while todo:
+        parts = todo.pop().split(".")
+        for k in range(1, len(parts) + 1):  # the packages on the way, then the module itself
+            path = module_file(".".join(parts[:k]), top)
+            if path is not None and path not in seen:
+                seen.add(path)
+                todo.extend(_imported(path, top))
+    return sorted(seen)
+
+
+def forward_model_version(top: Optional[Path] = None) -> str:
+    """A digest of the forward model's source files (:func:`import_closure` of :data:`FORWARD_MODEL_ROOTS` in
+    the package folder ``top``, default this nerif's): any change to one of them makes new cache entries."""
+    return _digest(Path(top or _TOP))
+
+
+@functools.lru_cache(maxsize=4)
+def _digest(top: Path) -> str:
     h = hashlib.sha256()
-    for name in FORWARD_MODEL:
-        h.update((Path(__file__).parent / name).read_bytes())
+    for path in import_closure(FORWARD_MODEL_ROOTS, top):
+        h.update(str(path.relative_to(top)).encode() + b"\0" + path.read_bytes())
     return h.hexdigest()[:16]
 
 

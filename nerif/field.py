@@ -1,14 +1,20 @@
-"""The neural refractive-index field: encoder + tiny MLP with a bounded output, optionally gated by a 3-D mask."""
+"""The neural refractive-index field: encoder + tiny MLP with a bounded output, optionally gated by a 3-D mask;
+its moving average, its warm start from a volume, and its prior interval with the checks against it."""
 from __future__ import annotations
 
+import logging
 import math
 from typing import Callable, Optional
 
+import numpy as np
 import torch
 from torch import nn
 from torch.optim.swa_utils import AveragedModel
 
 from nerif.geometry import ProbeBox
+from nerif.physics import Ambient
+
+log = logging.getLogger(__name__)
 
 
 class NeuralField(nn.Module):
@@ -125,3 +131,34 @@ def prior_interval(configured=None, data_prior=None) -> tuple[float, float]:
     (``data_prior``), else :data:`DEFAULT_PRIOR`."""
     prior = configured if configured is not None else (data_prior or DEFAULT_PRIOR)
     return float(prior[0]), float(prior[1])
+
+
+def check_truth_within(truth_T: Optional[np.ndarray], ambient: Ambient, prior: tuple[float, float]) -> None:
+    """Refuse a known truth (nx, ny, nz) [K] that a field of sigma in ``prior`` cannot represent (hotter than
+    the prior's bound allows), in one sentence naming the setting to raise. Nothing where no truth is known."""
+    if truth_T is None or not ambient.temperature_known:
+        return
+    sigma = ambient.sigma_from_temperature(truth_T)
+    if sigma.min() < prior[0] - 1e-6 or sigma.max() > prior[1] + 1e-6:
+        hottest = float(truth_T.max())
+        bound = float(ambient.temperature_from_sigma(np.float64(prior[0])))
+        raise ValueError(f"the true field reaches {hottest:.0f} K, beyond what the field can represent with "
+                         f"data.T_max={ambient.T_max:g} K (up to {bound:.0f} K at the prior's bound sigma = "
+                         f"{prior[0]:g}): set data.T_max={np.ceil(hottest / 50) * 50:.0f} or higher")
+
+
+def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Ambient) -> dict:
+    """Share of the flame (voxels of ``sigma`` below -0.05) within 1 % of the prior's lower bound, for
+    ``metrics.json``, and ``warnings`` when it is over 1 %: the flame may be hotter than ``data.T_max`` lets the
+    field be."""
+    a, b = prior
+    flame = sigma < -0.05
+    share = float((sigma[flame] <= a + 0.01 * (b - a)).mean()) if flame.any() else 0.0
+    out = {"flame_at_prior_bound": share}
+    if share > 0.01:
+        what = (f"the hottest {ambient.temperature_from_sigma(np.float64(a)):.0f} K the field can hold "
+                f"(data.T_max={ambient.T_max:g} K)" if ambient.temperature_known else f"the prior's bound sigma = {a:g}")
+        out["warnings"] = [f"{100 * share:.1f} % of the flame sits at {what}: it may be hotter; raise "
+                           f"{'data.T_max' if ambient.temperature_known else 'field.prior'}"]
+        log.warning("%s", out["warnings"][0])
+    return out

@@ -8,17 +8,15 @@ import time
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
 import torch
 from omegaconf import DictConfig
 
 from nerif.configs import group
 from nerif.data import DATASETS
 from nerif.data.scene import view_directions
-from nerif.io.export import write_json, write_npz, write_png, write_vti
-from nerif.io.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
+from nerif.io.export import write_json
+from nerif.io.outputs import summary_line, volume_slices, write_masks, write_outputs, write_sensing
 from nerif.masks import MASKS
-from nerif.sensing.displacement import view_displacements
 from nerif.solvers import SOLVERS
 
 log = logging.getLogger(__name__)
@@ -119,110 +117,3 @@ def ill_posed(scene) -> list[str]:
            "field needs at least 3, and the reconstruction is not to be trusted away from what they see")
     log.warning("%s", msg)
     return [msg]
-
-
-def write_masks(masks, scene, out_dir: Path) -> None:
-    """2-D masks as PNGs (one per view) and the 3-D mask as a volume."""
-    for v, img in enumerate(masks.images or []):
-        write_png(out_dir / "masks" / f"mask2d_view{v:02d}.png", img.astype(np.uint8) * 255)
-    if masks.volume is not None:
-        origin = [float(a[0]) for a in scene.box.axes()]
-        write_npz(out_dir / "mask3d.npz", mask=masks.volume, voxel_mm=scene.box.voxel_mm, origin_mm=np.asarray(origin))
-        write_vti(out_dir / "mask3d.vti", scene.box.voxel_mm, origin, mask=masks.volume.astype(np.float32))
-
-
-def write_sensing(scene, out_dir: Path) -> None:
-    """Realistic sensing, per view: the reference and distorted images (8-bit PNG, as a camera would save
-    them) and a figure of images and displacements."""
-    rec = scene.sensing
-    if rec is None:
-        return
-    for v, cam in enumerate(scene.cameras):
-        write_png(out_dir / "sensing" / f"reference_view{v:02d}.png", rec["reference"][v])
-        write_png(out_dir / "sensing" / f"distorted_view{v:02d}.png", rec["distorted"][v])
-        save_figure(sensing_figure(rec, v, title=f"{cam.name}: displacement RMSE of the flow "
-                                   f"{float(rec['displacement_rmse_px']):.3f} px (all views)"),
-                    out_dir / "sensing" / f"view{v:02d}.png")
-
-
-def volume_slices(sigma: np.ndarray, scene, title: str):
-    """Slices of the temperature (with the truth where known), or of sigma when no temperature can be inferred."""
-    if not scene.ambient.temperature_known:
-        return slice_figure(sigma, scene.box, None, title, unit="sigma", hot=-1)
-    return slice_figure(scene.ambient.temperature_from_sigma(sigma), scene.box, scene.truth_T, title)
-
-
-def write_heldout(solver, scene, out_dir: Path) -> dict:
-    """Predictions on every held-out ray: their errors, and per view a figure of observed, predicted and
-    difference (image displacements [px] where deflections are physical, else deflections)."""
-    h = scene.heldout
-    pred = solver.heldout_predictions()
-    physical = h.ambient.temperature_known
-    obs_all = view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras) if physical else h.eps
-    pred_all = view_displacements(pred, h.dirs, h.ray_views(), h.cameras) if physical else pred
-    for v, cam in enumerate(h.cameras):
-        sl = h.view_slice(v)
-        imgs = [h.view_image(v, vec[sl].detach().cpu().double().numpy(), np.nan) for vec in (obs_all, pred_all)]
-        save_figure(heldout_figure(*imgs, unit="px" if physical else "sigma", title=f"held out: {cam.name}"),
-                    out_dir / "heldout" / f"view{v:02d}.png")
-    return solver.heldout_errors(torch.arange(len(h.dirs), device=h.dirs.device), pred)
-
-
-def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
-    """Volumes (.npz, .vti), slice and curve PNGs, held-out figures, and the metrics of the final state."""
-    amb, box = scene.ambient, scene.box
-    sigma = solver.reconstruction()
-    vols = {"sigma": sigma}
-    if amb.temperature_known:
-        vols.update(T=amb.temperature_from_sigma(sigma), n=amb.n_from_sigma(sigma), delta=sigma * amb.delta_thre)
-    if scene.truth_T is not None:
-        vols["T_true"] = scene.truth_T
-    origin = [float(a[0]) for a in box.axes()]
-    write_npz(out_dir / "reconstruction.npz", voxel_mm=box.voxel_mm, origin_mm=np.asarray(origin), T0=amb.T0, n0=amb.n0,
-              delta_thre=amb.delta_thre, **vols)
-    write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, **vols)
-    label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
-    save_figure(volume_slices(sigma, scene, f"{label}, {solver.iteration} iterations"), out_dir / "slices.png")
-    save_figure(curves_figure(solver.history, losses), out_dir / "curves.png")
-    final = dict(solver.history[-1]) if solver.history else solver.evaluate()
-    final.pop("iteration", None)
-    if scene.heldout is not None:
-        final.update(write_heldout(solver, scene, out_dir))  # every held-out ray, not the evaluation subset
-    if not amb.temperature_known:
-        final["deflection_unit"] = "sigma (the data are deflections of sigma; no temperature is inferred)"
-    final.update(solver.timing())
-    final["wall_time_s"] = solver.train_seconds
-    final["history"] = solver.history
-    final.update(solver.labels)
-    final.update(solver.report)
-    final.update(solver.saturation(sigma))
-    if scene.sensing is not None:
-        final["displacement_rmse_px"] = float(scene.sensing["displacement_rmse_px"])
-        final["circle_of_confusion_px"] = float(scene.sensing["circle_of_confusion_px"])
-    if amb.temperature_known:
-        final["temperature_note"] = ("temperature from n assuming an air-dominated gas of fixed composition "
-                                     "(n - 1 = T0 (n0 - 1) / T)")
-    return final
-
-
-def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
-    """One line of the run's headline figures, each named as in ``metrics.json`` (after ``prefix``)."""
-    def known(k):
-        return m.get(k) is not None and np.isfinite(m[k])
-
-    parts = []
-    if known("temperature_rmse_K"):
-        flame = f" (flame {m['temperature_rmse_flame_K']:.1f} K)" if known("temperature_rmse_flame_K") else ""
-        parts.append(f"T RMSE {m['temperature_rmse_K']:.1f} K{flame}")
-    unit = "sigma" if "deflection_unit" in m else "rad"
-    parts.append(f"deflection RMSE {m['deflection_rmse']:.3g} {unit}")
-    if known("heldout_deflection_rmse"):
-        held = [f"deflection RMSE {m['heldout_deflection_rmse']:.3g} {unit}, PSNR {m['heldout_psnr_db']:.1f} dB"]
-        if known("heldout_displacement_rmse_px"):
-            held.append(f"displacement RMSE {m['heldout_displacement_rmse_px']:.3g} px, PSNR "
-                        f"{m['heldout_displacement_psnr_db']:.1f} dB")
-        parts.append("held out: " + "; ".join(held))
-    parts += [f"WARNING: {w}" for w in m.get("warnings", [])]
-    parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training ({m['ms_per_iteration']:.1f} ms/it), "
-                 f"{m['total_time_s']:.0f} s in all")
-    return "nerif: " + prefix + " | ".join(parts) + f" | {out_dir}"

@@ -25,12 +25,13 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from nerif.reconstruct import reconstruct, resuming, summary_line
 from nerif.data.frames import Frame
 from nerif.geometry import ProbeBox
 from nerif.io.export import write_json, write_pvd
+from nerif.io.outputs import summary_line
 from nerif.io.plots import save_figure, sequence_figure, slice_figure
 from nerif.io.summary import COLUMNS, write_tables
+from nerif.reconstruct import reconstruct, resuming
 from nerif.solvers import SOLVERS
 
 log = logging.getLogger(__name__)

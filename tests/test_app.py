@@ -230,7 +230,7 @@ def test_a_flame_free_scene_writes_strict_json_and_an_honest_summary_line(tmp_pa
 
 
 def test_the_summary_line_names_each_held_out_figure_as_metrics_json_does():
-    from nerif.reconstruct import summary_line
+    from nerif.io.outputs import summary_line
 
     m = {"deflection_rmse": 1e-5, "heldout_deflection_rmse": 2e-5, "heldout_psnr_db": 19.5,
          "heldout_displacement_rmse_px": 0.3, "heldout_displacement_psnr_db": 17.8, "iterations": 10,

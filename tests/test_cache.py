@@ -1,4 +1,6 @@
 """The array cache: computed once per payload, read back after, never shared between payloads."""
+from pathlib import Path
+
 import numpy as np
 
 from nerif.cache import cached_arrays
@@ -55,3 +57,49 @@ def test_the_cache_keeps_the_most_recently_used_entries_within_its_bound(tmp_pat
     for k in (1, 3, 0, 2):
         cached_arrays(tmp_path, "obs", {"k": k}, lambda: calls.append(k) or {"x": np.zeros(1)})
     assert calls[:2] == [0, 2]  # 1 and 3 were kept; 0 and 2 (least recently used) had gone
+
+
+def _copy_of_nerif(tmp_path):
+    import shutil
+
+    import nerif
+
+    top = tmp_path / "nerif"
+    shutil.copytree(Path(nerif.__file__).parent, top, ignore=shutil.ignore_patterns("__pycache__", "*.so"))
+    return top
+
+
+def test_the_forward_model_is_the_import_closure_of_what_renders_observations(tmp_path):
+    """The files that decide the synthetic observations are found from the imports (issue 26: a hand-written
+    list had left out the deflection renderer and the samplers), and a solver's file is not one of them."""
+    from nerif.cache import FORWARD_MODEL_ROOTS, _TOP, import_closure
+
+    files = {str(p.relative_to(_TOP)) for p in import_closure(FORWARD_MODEL_ROOTS)}
+    assert {"renderers/deflection.py", "renderers/samplers.py", "renderers/voxel.py", "sensing/realistic.py",
+            "sensing/flow.py", "data/synthetic.py", "data/phantoms.py", "geometry/camera.py", "physics.py"} <= files
+    assert not {"solvers/neural.py", "solvers/base.py", "reconstruct.py", "app.py", "losses/__init__.py"} & files
+
+
+def test_an_edit_to_a_file_of_the_forward_model_misses_the_cache(tmp_path, monkeypatch):
+    import nerif.cache as cache
+
+    top = _copy_of_nerif(tmp_path)
+    monkeypatch.setattr(cache, "_TOP", top)
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return {"x": np.zeros(2)}
+
+    cached_arrays(tmp_path / "c", "obs", {"k": 1}, compute)
+    cached_arrays(tmp_path / "c", "obs", {"k": 1}, compute)
+    assert len(calls) == 1
+    (top / "solvers" / "neural.py").write_text((top / "solvers" / "neural.py").read_text() + "\n# outside\n")
+    cache._digest.cache_clear()
+    cached_arrays(tmp_path / "c", "obs", {"k": 1}, compute)
+    assert len(calls) == 1  # a file outside the forward model: still a hit
+    for name in ("renderers/samplers.py", "renderers/deflection.py"):
+        (top / name).write_text((top / name).read_text() + "\n# an edit\n")
+        cache._digest.cache_clear()  # the code is read once per process: this is the next process
+        cached_arrays(tmp_path / "c", "obs", {"k": 1}, compute)
+    assert len(calls) == 3  # each edit: a miss, computed again

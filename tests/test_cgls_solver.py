@@ -39,8 +39,8 @@ def test_the_seed_picks_the_held_out_rays_followed_during_the_run():
                          "phantom": {"name": "gaussian_blob", "shape": [16, 16, 16], "voxel_mm": 3.0, "width_mm": 7.0}})
     sc = sc.split_views([5])
     a, b, c = (cgls(sc, f"seed={k}", "metrics.eval_rays_per_view=8") for k in (0, 0, 1))
-    assert torch.equal(a._heldout_index, b._heldout_index) and not torch.equal(a._heldout_index, c._heldout_index)
-    assert len(a._heldout_index) == 8
+    assert torch.equal(a.evaluation.heldout_index, b.evaluation.heldout_index) and not torch.equal(a.evaluation.heldout_index, c.evaluation.heldout_index)
+    assert len(a.evaluation.heldout_index) == 8
 
 
 def test_cgls_reconstructs_a_gaussian_blob_from_twelve_views():
@@ -53,10 +53,10 @@ def test_cgls_reconstructs_a_gaussian_blob_from_twelve_views():
     m = s.evaluate()
     assert m["temperature_rmse_K"] < 10.0, m  # peak 1200 K over 296 K ambient
     assert m["relative_residual"] < 0.1
-    # predictions of any rays (held-out views) are the forward model of the solution: on the training rays,
+    # predictions of any rays (held-out views, sigma units) are the forward model of the solution: on the training rays,
     # the observations minus the CGLS residual
     pred = s.predict(sc.origins[sc.ray_views()], sc.dirs)
-    assert torch.allclose(pred, sc.eps - s.cgls.r * s.scale, atol=1e-3 * float(sc.eps.abs().max()))
+    assert torch.allclose(pred, sc.observed - s.cgls.r, atol=1e-3 * float(sc.observed.abs().max()))
 
 
 def test_total_variation_beats_plain_cgls_on_a_hot_cube_under_noise(tmp_path):

@@ -126,11 +126,11 @@ def test_a_view_with_an_empty_2d_mask_trains_on_all_its_rays():
         warnings.simplefilter("ignore")  # the empty mask's warning (tests/test_backprojection.py)
         masks = MASKS.build({"name": "2d", "threshold": 1e-3, "radius_px": 2}, scene=scene)
     tr = solver(tiny_config("train.outside_fraction=0.1"), scene, masks)
-    idx = tr.draw(2, 16)
+    idx = tr.batches.draw(2, 16)
     assert len(idx) == 16 and bool(((idx >= sl.start) & (idx < sl.stop)).all())
-    batch, sl1 = tr.draw(1, 16), scene.view_slice(1)  # a view with a mask: 16 - round(1.6) = 14 rays inside it, 2 outside
+    batch, sl1 = tr.batches.draw(1, 16), scene.view_slice(1)  # a view with a mask: 16 - round(1.6) = 14 rays inside it, 2 outside
     assert int(torch.isin(batch, masks.inside[1]).sum()) == 14 and bool(((batch >= sl1.start) & (batch < sl1.stop)).all())
-    assert len(tr.draw(0, 16)) == 16  # view 0's mask holds every ray: all 16 from inside
+    assert len(tr.batches.draw(0, 16)) == 16  # view 0's mask holds every ray: all 16 from inside
     assert np.isfinite(tr.step()["loss"])
 
 
@@ -139,7 +139,7 @@ def test_a_view_with_an_empty_2d_mask_trains_on_all_its_rays():
 def test_a_batch_splits_its_rays_evenly_over_its_views_and_cycles_them(views, expected):
     tr = neural_solver(f"train.views_per_batch={views}", "train.rays_per_batch=26")
     for per_view in expected:
-        views_of = torch.searchsorted(tr.scene.view_start, tr.batch(), right=True) - 1
+        views_of = torch.searchsorted(tr.scene.view_start, tr.batches(tr.iteration), right=True) - 1
         assert torch.bincount(views_of, minlength=tr.scene.n_views).tolist() == per_view
         tr.step()
 

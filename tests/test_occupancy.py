@@ -48,7 +48,7 @@ def test_grid_marks_the_blob_and_frees_far_cells_then_skips_samples():
                           "update_every": 1, "full_updates": 3, "threshold": 1e-3})
     g = torch.Generator().manual_seed(0)
     for it in range(3):
-        occ.update(field, it, g)
+        occ.update(ph.box, lambda p: field(p).abs(), it, g)
     centre = torch.zeros(1, 3)
     corner = torch.as_tensor(ph.box.half_mm * 0.95, dtype=torch.float32)[None]
     assert bool(occ.occupied(ph.box, centre)) and not bool(occ.occupied(ph.box, corner))
@@ -64,3 +64,23 @@ def test_grid_marks_the_blob_and_frees_far_cells_then_skips_samples():
     a = render_deflections(field, s2, {"discrete": False}, 0.2)["discrete"]
     b = render_deflections(field, uni, {"discrete": False}, 0.2)["discrete"]
     assert ((a - b).norm() / b.norm()).item() < 0.02
+
+
+def test_the_grid_is_module_state_that_a_checkpoint_restores():
+    """Buffers, not hand-kept attributes: a fresh grid loaded from another's state_dict marks the same cells, and
+    the state of a checkpoint from before the buffers (``updates`` a plain int) still loads."""
+    ph, field = _blob()
+    occ = SAMPLERS.build({"name": "occupancy", "samples_per_ray": 16, "resolution": 16, "warmup": 0,
+                          "update_every": 1, "threshold": 1e-3})
+    assert set(dict(occ.named_buffers())) == {"density", "bits", "updates"}
+    g = torch.Generator().manual_seed(0)
+    for it in range(2):
+        occ.update(ph.box, lambda p: field(p).abs(), it, g)
+    state = occ.state_dict()
+    p = torch.as_tensor(ph.box.centres().reshape(-1, 3), dtype=torch.float32)
+    for st in (state, {**state, "updates": int(state["updates"])}):
+        fresh = SAMPLERS.build({"name": "occupancy", "samples_per_ray": 16, "resolution": 16})
+        assert bool(fresh.occupied(ph.box, p).all())  # new: every cell occupied
+        fresh.load_state_dict(st)
+        assert torch.equal(fresh.occupied(ph.box, p), occ.occupied(ph.box, p)) and int(fresh.updates) == 2
+    assert 0.0 < occ.occupancy_fraction() < 1.0

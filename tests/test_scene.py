@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from nerif.data import DATASETS
-from nerif.data.scene import finite_or_masked
+from nerif.data.folders import finite_or_masked
 
 BLOB = {"name": "gaussian_blob", "shape": [16, 16, 16], "voxel_mm": 2.0, "width_mm": 5.0}
 RIG = {"name": "arc", "n_cameras": 3, "binning": 40}

@@ -5,7 +5,8 @@ import pytest
 import torch
 
 from nerif.data import DATASETS
-from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, fixed_rays
+from nerif.evaluation import fixed_rays
+from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver
 
 METRICS = {"flame_threshold_K": 1.0, "eval_rays_per_view": 4}
 

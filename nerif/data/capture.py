@@ -54,8 +54,8 @@ import torch
 import yaml
 
 from nerif.data.frames import FRAMES, Frame, pick_frames
-from nerif.data.scene import (DATASETS, Scene, blocks_inside, dataset_folder, heldout_views, region_of_interest,
-                              scene_from_images)
+from nerif.data.folders import blocks_inside, dataset_folder, region_of_interest
+from nerif.data.scene import DATASETS, Scene, ViewImages, heldout_views, scene_from_images
 from nerif.geometry import ProbeBox, arc_rig, rays_in_box
 from nerif.io.export import atomic_write, write_png
 from nerif.physics import Ambient
@@ -274,7 +274,8 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
                       float(rig.get("T_max", 2000.0)))
     held = heldout_views(heldout if heldout is not None else rig.get("heldout", [len(cameras) - 1]), len(cameras))
     prior = sigma_prior(rig, ambient, root)
-    _, _, pixel, starts = rays_in_box(box, cameras)  # a camera that does not see the box fails here, before the flow
+    rays = rays_in_box(box, cameras, device)  # a camera that does not see the box fails here, before the flow
+    pixel, starts = rays[2].cpu(), rays[3].cpu()
     for v, cam in enumerate(cameras):
         if not valid.reshape(-1)[pixel[starts[v]:starts[v + 1]].numpy()].any():
             raise ValueError(f"{cam.name}: no pixel of roi_px {rig['roi_px']} sees the probe box "
@@ -292,8 +293,10 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
         eps_images.append(eps.numpy().reshape(cam.height, cam.width, 3))
         log.info("%s: displacement up to %.2f px", cam.name, float(np.nanmax(np.linalg.norm(u, axis=-1))))
 
-    scene = scene_from_images(box, ambient, cameras, eps_images, [valid] * len(cameras), device=device,
-                              sigma_prior=prior)
+    views = [ViewImages(torch.as_tensor(r, device=device), torch.as_tensor(i, device=device), cam)
+             for r, i, cam in zip(refs, images, full)]
+    scene = scene_from_images(box, ambient, cameras, eps_images, [valid] * len(cameras), device=device, rays=rays,
+                              sigma_prior=prior, images=views)
     return scene.split_views(held)
 
 
@@ -301,7 +304,7 @@ def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Opt
     """Write synthetic scenes sensed realistically as a capture folder (8-bit images and ``rig.yaml``).
 
     Args:
-        scenes: a scene from :func:`nerif.data.scene.synthetic` with ``sensing=realistic`` (its images), or an
+        scenes: a scene from :func:`nerif.data.synthetic.synthetic` with ``sensing=realistic`` (its images), or an
             iterable of such scenes of one rig, the frames of a time series at ``times`` [s] (each is written
             as it comes, to ``frame_KKKK/``); the rig file describes the first scene's cameras.
         heldout: views never trained on (default: the last).

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from nerif.data.phantoms import lifted_jet_profile, phantom5_temperature
-from nerif.data.scene import with_noise
+from nerif.data.synthetic import with_noise
 from nerif.data.transforms import write_split
 from nerif.geometry import ProbeBox, arc_rig, rays_in_box, view_index
 from nerif.io.export import atomic_write

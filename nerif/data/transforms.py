@@ -25,8 +25,8 @@ import cv2
 import numpy as np
 
 from nerif.data.phantoms import read_volume
-from nerif.data.scene import (DATASETS, Scene, blocks_inside, dataset_folder, region_of_interest,
-                              scene_from_images)
+from nerif.data.folders import blocks_inside, dataset_folder, region_of_interest
+from nerif.data.scene import DATASETS, Scene, scene_from_images
 from nerif.geometry import Camera, ProbeBox, camera_from_nerf_pose
 from nerif.io.export import atomic_write, write_png
 from nerif.physics import Ambient, check_temperature

@@ -1,3 +1,5 @@
+"""Frequency (NeRF positional) encoding: the coordinates and their sines and cosines at octave frequencies.
+(N, 3) in [-1, 1]^3 -> (N, 3 + 6 n_octaves)."""
 import math
 
 import torch

@@ -1,3 +1,7 @@
+"""Multiresolution hash encoding (Instant-NGP, Mueller et al. 2022): per level, the trilinear (or smoothstep)
+blend of the feature vectors stored at the 8 corners of the point's cell, the corners of fine levels hashed into
+a table of ``2^log2_table_size`` entries. (N, 3) in [-1, 1]^3 -> (N, n_levels n_features). The fused kernels
+for positions that need no gradient are in :mod:`nerif.encoders.hash_kernel`."""
 import functools
 import logging
 import math

@@ -1,3 +1,4 @@
+"""No encoding (``encoder=none``): the MLP sees the normalised coordinates themselves. (N, 3) -> (N, 3)."""
 import torch
 from torch import nn
 

@@ -10,7 +10,7 @@ updates, then a random ``subset_fraction`` of them.
 """
 from __future__ import annotations
 
-from typing import Optional
+from typing import Callable, Optional
 
 import torch
 
@@ -30,7 +30,9 @@ def unpack_bits(bits: torch.Tensor) -> torch.Tensor:
 
 @SAMPLERS.register("occupancy")
 class OccupancySampler(UniformSampler):
-    """The uniform sampler's samples (same positions, same fixed step per ray), minus those in empty cells.
+    """The uniform sampler's samples (same positions, same fixed step per ray), minus those in empty cells: an
+    ``nn.Module`` whose grid is in buffers (as nerfacc's ``OccGridEstimator``), updated through a callback that
+    evaluates the field.
 
     Args:
         samples_per_ray, jitter: as :class:`UniformSampler`.
@@ -52,17 +54,13 @@ class OccupancySampler(UniformSampler):
         self.resolution, self.decay, self.threshold = int(resolution), float(decay), float(threshold)
         self.update_every, self.warmup, self.full_updates = int(update_every), int(warmup), int(full_updates)
         self.subset_fraction = float(subset_fraction)
-        self.density: Optional[torch.Tensor] = None  # (R^3,) float, +inf = never visited (occupied)
-        self.bits: Optional[torch.Tensor] = None  # (R^3 / 8,) uint8
-        self.updates = 0
+        n = self.resolution**3
+        # every cell occupied until updated: density +inf means never visited
+        self.register_buffer("density", torch.full((n,), float("inf")))  # (R^3,) float
+        self.register_buffer("bits", pack_bits(torch.ones(n, dtype=torch.bool)))  # (R^3 / 8,) uint8
+        self.register_buffer("updates", torch.zeros((), dtype=torch.long))  # updates made
 
     # --- grid ---
-    def _init(self, device) -> None:
-        if self.density is None:
-            n = self.resolution**3
-            self.density = torch.full((n,), float("inf"), device=device)  # everything occupied until updated
-            self.bits = pack_bits(torch.ones(n, dtype=torch.bool, device=device))
-
     def cell_index(self, box, p: torch.Tensor) -> torch.Tensor:
         """(N, 3) [mm] -> (N,) flat cell index ``(i R + j) R + k`` of cell (i, j, k), clamped to the grid."""
         u = (box.to_grid(p) + 1) * 0.5 * self.resolution
@@ -71,44 +69,44 @@ class OccupancySampler(UniformSampler):
 
     def occupied(self, box, p: torch.Tensor) -> torch.Tensor:
         """(N, 3) [mm] -> (N,) bool."""
-        self._init(p.device)
         idx = self.cell_index(box, p)
         return ((self.bits[idx >> 3] >> (idx & 7).to(torch.uint8)) & 1).bool()
 
     @torch.no_grad()
-    def update(self, field, iteration: int, generator: Optional[torch.Generator] = None) -> None:
+    def update(self, box, occ_eval_fn: Callable[[torch.Tensor], torch.Tensor], iteration: int,
+               generator: Optional[torch.Generator] = None) -> None:
+        """Visit the cells due at ``iteration``: ``density = max(decay density, occ_eval_fn(q))`` at a jittered
+        point q of each; ``occ_eval_fn``: (N, 3) [mm] -> (N,) |sigma|."""
         if iteration < self.warmup or (iteration - self.warmup) % self.update_every:
             return
-        device = next(field.parameters()).device
-        self._init(device)
+        device = self.density.device
         R, n = self.resolution, self.resolution**3
-        if self.updates < self.full_updates:
+        if int(self.updates) < self.full_updates:
             cells = torch.arange(n, device=device)
         else:
             cells = torch.randperm(n, generator=generator, device=device)[: max(1, int(self.subset_fraction * n))]
         ijk = torch.stack([cells // (R * R), (cells // R) % R, cells % R], -1).float()
         u = (ijk + torch.rand(len(cells), 3, generator=generator, device=device)) / R  # jittered, in [0, 1)
-        p = field.box.from_grid(u * 2 - 1)
-        sigma = torch.cat([field(p[i:i + (1 << 18)]).abs() for i in range(0, len(p), 1 << 18)])
+        p = box.from_grid(u * 2 - 1)
+        value = torch.cat([occ_eval_fn(p[i:i + (1 << 18)]) for i in range(0, len(p), 1 << 18)])
         old = self.density[cells]
         old = torch.where(torch.isinf(old), torch.zeros_like(old), old)  # first visit: no history
-        self.density[cells] = torch.maximum(old * self.decay, sigma.float())
-        self.bits = pack_bits(self.density > self.threshold)
+        self.density[cells] = torch.maximum(old * self.decay, value.float())
+        self.bits.copy_(pack_bits(self.density > self.threshold))
         self.updates += 1
 
     def occupancy_fraction(self) -> float:
-        return float(unpack_bits(self.bits).float().mean()) if self.bits is not None else 1.0
+        return float(unpack_bits(self.bits).float().mean())
 
     # --- sampling ---
-    def __call__(self, box, origins: torch.Tensor, dirs: torch.Tensor,
-                 generator: Optional[torch.Generator] = None) -> Samples:
-        s = super().__call__(box, origins, dirs, generator)
+    def forward(self, box, origins: torch.Tensor, dirs: torch.Tensor,
+                generator: Optional[torch.Generator] = None) -> Samples:
+        s = super().forward(box, origins, dirs, generator)
         keep = self.occupied(box, s.positions)
         return Samples(s.positions[keep], s.dt[keep], s.ray_index[keep], s.n_rays)
 
-    def state_dict(self) -> dict:
-        return {"density": self.density, "bits": self.bits, "updates": self.updates}
-
-    def load_state_dict(self, state: dict) -> None:
-        if state:
-            self.density, self.bits, self.updates = state["density"], state["bits"], state["updates"]
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        key = prefix + "updates"
+        if key in state_dict and not torch.is_tensor(state_dict[key]):  # a checkpoint from before the buffers
+            state_dict[key] = torch.tensor(int(state_dict[key]))
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)

@@ -2,13 +2,19 @@
 
 Samples are packed (ragged): ``positions (S, 3)``, step lengths ``dt (S,)`` and ``ray_index (S,)``, so a
 sampler may emit any number of samples per ray and rays that miss the box emit none.
+
+A sampler is an ``nn.Module`` (its state, if any, in buffers: ``.to(device)`` and checkpoints as any module),
+called as ``sampler(box, origins, dirs, generator)``, and told before every training iteration
+``sampler.update(box, occ_eval_fn, iteration, generator)``, with ``occ_eval_fn(positions (N, 3) [mm]) -> (N,)``
+the field's occupancy value ``|sigma|`` there, so that a sampler that skips empty space can follow the field.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
+from typing import Callable, Optional
 
 import torch
+from torch import nn
 
 from nerif.geometry import ProbeBox
 from nerif.registry import Registry
@@ -37,7 +43,7 @@ class Samples:
 
 
 @SAMPLERS.register("uniform")
-class UniformSampler:
+class UniformSampler(nn.Module):
     """K samples per ray, evenly over its chord through the box, shifted by one random offset per ray.
 
     Sample k of a ray with chord [t0, t1] sits at ``t0 + (k + u) (t1 - t0) / K`` with ``u ~ U(0, 1)``
@@ -45,20 +51,16 @@ class UniformSampler:
     """
 
     def __init__(self, samples_per_ray: int = 32, jitter: bool = True):
+        super().__init__()
         if samples_per_ray < 2:
             raise ValueError(f"samples per ray K must be at least 2, got {samples_per_ray}")
         self.samples_per_ray, self.jitter = int(samples_per_ray), jitter
 
-    def update(self, field, iteration: int, generator: Optional[torch.Generator] = None) -> None:
+    def update(self, box: ProbeBox, occ_eval_fn: Callable[[torch.Tensor], torch.Tensor], iteration: int,
+               generator: Optional[torch.Generator] = None) -> None:
         """Called before every training iteration; the uniform sampler keeps no state."""
 
-    def state_dict(self) -> dict:
-        return {}
-
-    def load_state_dict(self, state: dict) -> None:
-        pass
-
-    def __call__(self, box: ProbeBox, origins: torch.Tensor, dirs: torch.Tensor,
+    def forward(self, box: ProbeBox, origins: torch.Tensor, dirs: torch.Tensor,
                  generator: Optional[torch.Generator] = None) -> Samples:
         """origins, dirs: (R, 3) -> Samples with K samples per ray that hits the box."""
         K = self.samples_per_ray

@@ -34,6 +34,17 @@ def warp(image: torch.Tensor, u: torch.Tensor, mode: str = "bicubic") -> torch.T
     return out[0, 0]
 
 
+def sample(image: torch.Tensor, x: torch.Tensor, mode: str = "bicubic") -> torch.Tensor:
+    """The image at points ``x`` (P, 2) [px] (column, row; pixel centres at integers), differentiable in ``x``:
+    (H, W) -> (P,). Points past the border read the border value."""
+    H, W = image.shape
+    scale = x.new_tensor([2.0 / max(W - 1, 1), 2.0 / max(H - 1, 1)])
+    grid = (x * scale - 1.0).to(image.dtype)[None, None]  # (1, 1, P, 2), align_corners=True
+    out = torch.nn.functional.grid_sample(image[None, None], grid, mode=mode, padding_mode="border",
+                                          align_corners=True)
+    return out[0, 0, 0]
+
+
 def diffraction_blur(image: torch.Tensor, d_diff_px: float) -> torch.Tensor:
     """Blur by the Airy disc of diameter ``d_diff_px`` (to first zero), as a Gaussian of sigma 0.42 lambda N (1+M)
     = ``0.172 d_diff``. (H, W) -> (H, W)."""

@@ -22,12 +22,11 @@ from typing import Callable, Mapping, Optional
 import numpy as np
 import torch
 
+from nerif.evaluation import Evaluation
 from nerif.geometry import box_faces
 from nerif.io.export import atomic_save_torch
 from nerif.masks.backprojection import ambient_faces
-from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
 from nerif.registry import Registry
-from nerif.sensing.displacement import view_displacements
 
 log = logging.getLogger(__name__)
 SOLVERS = Registry("solver", package="nerif.solvers")
@@ -80,14 +79,6 @@ def check_faces(setting, key: str = "loss.ambient_faces", auto: bool = True) -> 
     box_faces(setting)
 
 
-def fixed_rays(scene, per_view: int, seed: int) -> torch.Tensor:
-    """Up to ``per_view`` random rays of every view of ``scene`` (scene indices), the same for a given seed."""
-    g = torch.Generator().manual_seed(seed)
-    counts, starts = scene.view_counts().cpu(), scene.view_start.cpu()
-    idx = [s + torch.randperm(int(c), generator=g)[:per_view] for s, c in zip(starts[:-1], counts)]
-    return torch.cat(idx).to(scene.dirs.device)
-
-
 class IterativeSolver:
     """State every solver shares: ``iterations`` to run, ``iteration`` done, ``history`` of evaluations,
     ``train_seconds`` of timed steps and each step's duration.
@@ -114,6 +105,7 @@ class IterativeSolver:
         self.eval_rays_per_view = int(metrics["eval_rays_per_view"])
         if self.eval_rays_per_view < 1:
             raise ValueError(f"metrics.eval_rays_per_view must be at least 1, got {self.eval_rays_per_view}")
+        self.evaluation: Optional[Evaluation] = None  # until setup
         self.seed, self.label = int(seed), str(label)
         self.scene, self.device = None, torch.device("cpu")  # until setup
         self.iteration = 0
@@ -128,14 +120,7 @@ class IterativeSolver:
         """Give the solver its data: the scene (rays, observations, held-out views) and the masks. Subclasses
         build their data-dependent state here, after this base part. Returns the solver."""
         self.scene, self.device = scene, scene.dirs.device
-        self._heldout_index, self._heldout_peaks = None, {}
-        if scene.heldout is not None:
-            h = scene.heldout
-            self._heldout_index = fixed_rays(h, self.eval_rays_per_view, self.seed + 2)
-            self._heldout_peaks["deflection"] = value_range(h.eps)  # PSNR peaks: the range of every observation
-            if h.ambient.temperature_known:
-                u = view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras)
-                self._heldout_peaks["displacement"] = value_range(u)
+        self.evaluation = Evaluation(scene, self.flame_threshold_K, self.eval_rays_per_view, self.seed)
         return self
 
     def resolve_ambient_faces(self, setting, masks, min_cover: float, fallback) -> list[str]:
@@ -162,54 +147,16 @@ class IterativeSolver:
         self.train_seconds += dt
         self.step_times.append(dt)
 
-    def field_errors(self, sigma: np.ndarray) -> dict:
-        """Temperature and sigma errors of a sigma volume against the scene's truth (empty without one)."""
-        if self.scene.truth_T is None:
-            return {}
-        amb, Tt = self.scene.ambient, self.scene.truth_T
-        T, sigma_true = amb.temperature_from_sigma(sigma), amb.sigma_from_temperature(Tt)
-        flame = flame_region(Tt, amb.T0, self.flame_threshold_K)
-        norm, sigma_rmse = float(np.sqrt(np.mean(sigma_true**2))), rmse(sigma, sigma_true)
-        return {"temperature_rmse_K": rmse(T, Tt),
-                "temperature_rmse_flame_K": rmse(T, Tt, flame) if flame.any() else None,  # None: no flame at all
-                "sigma_rmse": sigma_rmse,
-                "sigma_relative_error": sigma_rmse / norm if norm > 0 else None}  # |s - s_true| / |s_true|
-
     def saturation(self, sigma: np.ndarray) -> dict:
         """What a reconstruction ``sigma`` says about the solver's bounds, for ``metrics.json``: a bounded
         solver reports the share of the flame at its bound, and ``warnings`` when that is sizeable. None here."""
         return {}
 
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
-        """Deflections [rad] (R, 3) of rays (R, 3) through the current field; only their part perpendicular to
-        the rays when the scene's observations are perpendicular-only."""
+        """Deflections of sigma (R, 3) of rays (R, 3) through the current reconstruction, in the unit of
+        ``scene.observed``; only their part perpendicular to the rays when the scene's observations are
+        perpendicular-only. What :class:`nerif.evaluation.Evaluation` scores."""
         raise NotImplementedError
-
-    def heldout_predictions(self, index: Optional[torch.Tensor] = None) -> torch.Tensor:
-        """Predicted deflections [rad] of the held-out rays ``index`` (default: all), (R, 3)."""
-        h = self.scene.heldout
-        index = torch.arange(len(h.dirs), device=h.dirs.device) if index is None else index
-        return self.predict(h.origins[h.ray_views()[index]], h.dirs[index])
-
-    def heldout_errors(self, index: Optional[torch.Tensor] = None, pred: Optional[torch.Tensor] = None) -> dict:
-        """Errors on the held-out views (empty without any): deflection RMSE [rad] and PSNR [dB] of the predicted
-        deflections against the observed ones and, where deflections have physical units, the same for the image
-        displacements [px] the cameras would see. ``index``: held-out rays (default: the fixed evaluation subset);
-        ``pred``: their predictions when already computed."""
-        h = self.scene.heldout
-        if h is None:
-            return {}
-        index = self._heldout_index if index is None else index
-        pred = self.heldout_predictions(index) if pred is None else pred
-        obs = h.eps[index]
-        peaks = self._heldout_peaks
-        m = {"heldout_deflection_rmse": deflection_rmse(pred, obs), "heldout_psnr_db": psnr_db(pred, obs, peaks["deflection"])}
-        if h.ambient.temperature_known:
-            views, d = h.ray_views()[index], h.dirs[index]
-            u_pred, u_obs = (view_displacements(e, d, views, h.cameras) for e in (pred, obs))
-            m.update(heldout_displacement_rmse_px=deflection_rmse(u_pred, u_obs),
-                     heldout_displacement_psnr_db=psnr_db(u_pred, u_obs, peaks["displacement"]))
-        return m
 
     # --- checkpoints ---
     def state_dict(self) -> dict:

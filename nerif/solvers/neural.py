@@ -14,12 +14,14 @@ import torch
 from nerif.data import Scene
 from nerif.encoders import ENCODERS
 from nerif.data.phantoms import read_volume
-from nerif.field import NeuralField, averaged_field, fit_to_volume, prior_interval
-from nerif.losses import AmbientBoundary, TotalVariation, deflection_terms, weighted_sum
-from nerif.metrics import deflection_rmse
+from nerif.field import (NeuralField, averaged_field, check_truth_within, fit_to_volume, prior_interval,
+                         prior_saturation)
+from nerif.losses import AmbientBoundary, TotalVariation, weighted_sum
 from nerif.renderers import SAMPLERS, render_deflections
 from nerif.renderers.samplers import UniformSampler
-from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_faces, fixed_rays
+from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_faces
+from nerif.solvers.batches import RayBatcher, check_views_per_batch
+from nerif.solvers.data_terms import DATA_TERMS, scene_rays
 
 log = logging.getLogger(__name__)
 
@@ -57,16 +59,14 @@ class NeuralSolver(IterativeSolver):
     starts_from_previous = True
 
     def __init__(self, *, encoder: Mapping, field: Mapping, grad: Mapping, sampler: Mapping, loss: Mapping,
-                 train: Mapping, metrics: Mapping, seed: int, label: str):
+                 train: Mapping, metrics: Mapping, seed: int, label: str, data_term: Optional[Mapping] = None):
         super().__init__(iterations=train["iterations"], eval_every=train["eval_every"], metrics=metrics, seed=seed,
                          label=label)
         self.rays_per_batch = int(train["rays_per_batch"])
         if self.rays_per_batch < 1:
             raise ValueError(f"rays per batch must be at least 1, got {self.rays_per_batch}")
-        k = train["views_per_batch"]
-        if not (k == "all" or (isinstance(k, int) and not isinstance(k, bool) and k >= 1)):
-            raise ValueError(f"train.views_per_batch must be a number of views (at least 1) or 'all', got {k!r}")
-        self.views_per_batch = k
+        check_views_per_batch(train["views_per_batch"])
+        self.views_per_batch = train["views_per_batch"]
         self.stop_tol = train["stop_when_converged"]
         if self.stop_tol is not None and not 0.0 < float(self.stop_tol) < 1.0:
             raise ValueError(f"train.stop_when_converged={self.stop_tol}: a relative improvement within (0, 1), or null")
@@ -86,6 +86,7 @@ class NeuralSolver(IterativeSolver):
         check_faces(loss["ambient_fallback"], "loss.ambient_fallback", auto=False)
         self.encoder = ENCODERS.build(encoder)
         self.sampler = SAMPLERS.build(sampler)
+        self.data_term = DATA_TERMS.build(data_term or {"name": "flow"})
         self.hidden, self.prior = tuple(field["hidden"]), field["prior"]
         self.table_decay = float(train["table_decay"])
         self.init_volume, self.init_iterations = train["init_volume"], int(train["init_iterations"])
@@ -99,24 +100,29 @@ class NeuralSolver(IterativeSolver):
         self.loss_cfg = dict(loss)
         self.optim_cfg = {k: train[k] for k in ("lr", "betas", "eps", "lr_min")}
         self.labels.update(encoder=encoder["name"], grad=grad["name"])
+        if data_term is not None and data_term["name"] != "flow":
+            self.labels["data_term"] = data_term["name"]
 
     def setup(self, scene: Scene, masks) -> "NeuralSolver":
         """The field on the scene's probe box (gated by ``masks.gate``), its optimiser, and the ray pools training
         draws from (``masks.inside``)."""
         super().setup(scene, masks)
         self.interval = prior = prior_interval(self.prior, scene.sigma_prior)  # the field's sigma bounds (a, b)
-        self._check_truth_within(prior)
+        check_truth_within(scene.truth_T, scene.ambient, prior)
         self.field = NeuralField(self.encoder, scene.box, hidden=self.hidden, prior=prior, gate=masks.gate)
         self.field.to(self.device)
+        self.sampler.to(self.device)
         with torch.no_grad():  # builds (first run on a machine) or loads the encoder's compiled kernels now, in setup
             self.field.network(torch.zeros(1, 3, device=self.device))
         lc = self.loss_cfg
         faces = self.resolve_ambient_faces(lc["ambient_faces"], masks, lc["crossed_cover"], lc["ambient_fallback"])
         b = AmbientBoundary(scene.box, faces, lc["ambient_weight"], lc["ambient_points"])
         self.boundary = b if b.active else None
-        self.pools = self._pools(scene, masks.inside, self.outside_fraction)
-        inside = torch.cat([pool[0] for pool in self.pools])
-        rms = float(scene.eps[inside].double().norm(dim=-1).pow(2).mean().sqrt()) / scene.ambient.delta_thre
+        self.generator = torch.Generator(self.device).manual_seed(self.seed)
+        self.batches = RayBatcher(scene, masks.inside, self.rays_per_batch, self.views_per_batch,
+                                  self.outside_fraction, self.generator)
+        self.data_term.setup(scene, self.batches, self.iterations, masks)
+        rms = float(scene.eps[self.batches.inside()].double().norm(dim=-1).pow(2).mean().sqrt()) / scene.scale
         tv = TotalVariation(scene.box, lc["tv_weight"], lc["tv_points"], rms)
         self.tv = tv if tv.active else None
         oc = self.optim_cfg
@@ -128,18 +134,15 @@ class NeuralSolver(IterativeSolver):
         self.optimizer = torch.optim.AdamW(groups, lr=oc["lr"], betas=tuple(oc["betas"]), eps=oc["eps"], fused=fused)
         self.scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(self.optimizer, T_max=self.iterations,
                                                                     eta_min=oc["lr_min"])
-        self.generator = torch.Generator(self.device).manual_seed(self.seed)
         if self.init_volume is not None:
             self._warm_start(self.init_volume)
         self.average = averaged_field(self.field, self.ema_decay, self.rate) if self.ema_decay > 0 else None
         # central-difference step: b_min / (2 K), K the most samples per ray
         self.step_mm = scene.box.shortest_side_mm / (2 * self.sampler.samples_per_ray)
-        self.scale = scene.ambient.delta_thre  # rad per unit of sigma deflection
         self.samples_seen = 0
         self.rays_seen = 0
         self.samples_max = 0
         self.rays_skipped = 0
-        self._eval_index = fixed_rays(scene, self.eval_rays_per_view, self.seed + 1)
         self._eval_sampler = UniformSampler(self.sampler.samples_per_ray, jitter=False)
         return self
 
@@ -157,93 +160,26 @@ class NeuralSolver(IterativeSolver):
         log.info("warm start: the field fits %s to %.3g (RMS sigma) after %d iterations", path, rms,
                  self.init_iterations)
 
-    def _check_truth_within(self, prior: tuple[float, float]) -> None:
-        """Refuse a known truth that the field cannot represent (hotter than its prior's bound allows)."""
-        amb = self.scene.ambient
-        if self.scene.truth_T is None or not amb.temperature_known:
-            return
-        sigma = amb.sigma_from_temperature(self.scene.truth_T)
-        if sigma.min() < prior[0] - 1e-6 or sigma.max() > prior[1] + 1e-6:
-            hottest = float(self.scene.truth_T.max())
-            bound = float(amb.temperature_from_sigma(np.float64(prior[0])))
-            raise ValueError(f"the true field reaches {hottest:.0f} K, beyond what the field can represent with "
-                             f"data.T_max={amb.T_max:g} K (up to {bound:.0f} K at the prior's bound sigma = "
-                             f"{prior[0]:g}): set data.T_max={np.ceil(hottest / 50) * 50:.0f} or higher")
-
     def saturation(self, sigma: np.ndarray) -> dict:
-        """Share of the flame (voxels with sigma below -0.05) within 1 % of the prior's lower bound, and
-        ``warnings`` when it is over 1 %: the flame may be hotter than ``data.T_max`` lets the field be."""
-        a, b = self.interval
-        flame = sigma < -0.05
-        share = float((sigma[flame] <= a + 0.01 * (b - a)).mean()) if flame.any() else 0.0
-        out = {"flame_at_prior_bound": share}
-        if share > 0.01:
-            amb = self.scene.ambient
-            what = (f"the hottest {amb.temperature_from_sigma(np.float64(a)):.0f} K the field can hold "
-                    f"(data.T_max={amb.T_max:g} K)" if amb.temperature_known else f"the prior's bound sigma = {a:g}")
-            out["warnings"] = [f"{100 * share:.1f} % of the flame sits at {what}: it may be hotter; raise "
-                               f"{'data.T_max' if amb.temperature_known else 'field.prior'}"]
-            log.warning("%s", out["warnings"][0])
-        return out
+        """:func:`nerif.field.prior_saturation` of ``sigma`` within this field's prior."""
+        return prior_saturation(sigma, self.interval, self.scene.ambient)
 
     # --- batches ---
-    def rays(self, index: torch.Tensor):
-        """Ray origins, directions and observed deflections (sigma units) of scene rays ``index``."""
-        views = torch.searchsorted(self.scene.view_start, index, right=True) - 1
-        return self.scene.origins[views], self.scene.dirs[index], self.scene.eps[index] / self.scale
-
     def _measured(self, d: torch.Tensor) -> Optional[torch.Tensor]:
         """Ray directions to project the rendered deflections with, when only their perpendicular part is measured."""
         return d if self.scene.perpendicular_only else None
 
-    def _pools(self, scene: Scene, inside, outside_fraction: float) -> list[tuple[torch.Tensor, Optional[torch.Tensor]]]:
-        """Per view: (rays inside its 2-D mask, rays outside it or None), as scene indices; ``inside``: per view,
-        the scene indices of the rays inside its 2-D mask (None: every ray)."""
-        pools = []
-        for v in range(scene.n_views):
-            sl = scene.view_slice(v)
-            every = torch.arange(sl.start, sl.stop, device=scene.dirs.device)
-            if inside is None or len(inside[v]) == 0:  # no mask, or an empty one (warned when it was built)
-                pools.append((every, None))
-                continue
-            outside = every[~torch.isin(every, inside[v])]
-            pools.append((inside[v], outside if len(outside) else None))
-        return pools
-
-    def draw(self, view: int, n: int) -> torch.Tensor:
-        """Scene indices of ``n`` random rays of ``view``: inside its 2-D mask, and ``round(outside_fraction n)``
-        of them outside it."""
-        inside, outside = self.pools[view]
-        n_out = int(round(self.outside_fraction * n)) if outside is not None else 0
-        parts = [(inside, n - n_out)] + ([(outside, n_out)] if n_out else [])
-        return torch.cat([pool[torch.randint(len(pool), (m,), generator=self.generator, device=self.device)]
-                          for pool, m in parts])
-
-    def batch_views(self) -> list[int]:
-        """The views of this iteration's batch: the next ``views_per_batch`` views, cycled, so that every view
-        is seen equally often (with ``all``, every view in every batch)."""
-        n = self.scene.n_views
-        k = n if self.views_per_batch == "all" else min(self.views_per_batch, n)
-        return [(self.iteration * k + j) % n for j in range(k)]
-
-    def batch(self) -> torch.Tensor:
-        """Scene indices of this iteration's ``rays_per_batch`` rays, split evenly over :meth:`batch_views`."""
-        views = self.batch_views()
-        share, extra = divmod(self.rays_per_batch, len(views))
-        counts = [share + (j < extra) for j in range(len(views))]
-        return torch.cat([self.draw(v, c) for v, c in zip(views, counts) if c])
-
     # --- optimisation ---
     def step(self) -> dict:
-        """One iteration on the next views (:meth:`batch_views`); returns the loss terms (floats)."""
+        """One iteration on the next views (:meth:`RayBatcher.views`); returns the loss terms (floats)."""
         t0 = time.perf_counter()
-        self.sampler.update(self.field, self.iteration, self.generator)
-        o, d, eps_obs = self.rays(self.batch())
-        samples = self.sampler(self.scene.box, o, d, self.generator)
+        self.sampler.update(self.scene.box, self.occupancy_value, self.iteration, self.generator)
+        batch = self.data_term.draw(self.iteration)
+        samples = self.sampler(self.scene.box, batch.origins, batch.dirs, self.generator)
         trained = {name: True for name, w in self.weights.items() if w > 0}
-        eps = render_deflections(self.field, samples, trained, self.step_mm, dirs=self._measured(d),
+        eps = render_deflections(self.field, samples, trained, self.step_mm, dirs=self._measured(batch.dirs),
                                  stencil=self.stencil)
-        terms = deflection_terms(eps, eps_obs)
+        terms = self.data_term.terms(eps, batch, self.iteration)
         loss = weighted_sum(terms, self.weights)
         boundary = self.boundary(self.field, self.generator) if self.boundary is not None else None
         if boundary is not None:
@@ -280,6 +216,10 @@ class NeuralSolver(IterativeSolver):
                    rays_skipped=stats[-1] / max(samples.n_rays, 1))
         return out
 
+    def occupancy_value(self, positions: torch.Tensor) -> torch.Tensor:
+        """(N, 3) [mm] -> (N,) |sigma| of the trained field: what the occupancy grid thresholds."""
+        return self.field(positions).abs()
+
     def rate(self) -> float:
         """The learning rate of the next step over its peak (``train.lr``), from 1 down to ``lr_min / lr``."""
         return self.optimizer.param_groups[0]["lr"] / self.scheduler.base_lrs[0]
@@ -298,7 +238,7 @@ class NeuralSolver(IterativeSolver):
         return self.estimate.on_grid(self.scene.box).cpu().numpy().astype(np.float64)
 
     def render(self, o: torch.Tensor, d: torch.Tensor, operators=("auto", "discrete")) -> dict:
-        """Deflections [rad] of rays (R, 3) by each operator, without any parameter graph."""
+        """Deflections of sigma of rays (R, 3) by each operator, without any parameter graph."""
         out = {n: [] for n in operators}
         chunk = max(1, min(4096, (1 << 18) // self._eval_sampler.samples_per_ray))  # rays per pass: bounded memory
         field = self.estimate
@@ -307,16 +247,16 @@ class NeuralSolver(IterativeSolver):
             eps = render_deflections(field, s, {n: False for n in operators}, self.step_mm,
                                      dirs=self._measured(d[i:i + chunk]), stencil=self.stencil)
             for n in operators:
-                out[n].append(eps[n].detach() * self.scale)
+                out[n].append(eps[n].detach())
         return {n: torch.cat(v) if v else d.new_zeros(0, 3) for n, v in out.items()}
 
     def predicted_deflections(self, index: torch.Tensor, operators=("auto", "discrete")) -> dict:
-        """Deflections [rad] of scene rays ``index`` by each operator."""
-        o, d, _ = self.rays(index)
-        return self.render(o, d, operators)
+        """Deflections of sigma of scene rays ``index`` by each operator."""
+        batch = scene_rays(self.scene, index)
+        return self.render(batch.origins, batch.dirs, operators)
 
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
-        """Deflections [rad] by the operator training fits (:attr:`fitted_operator`)."""
+        """Deflections of sigma by the operator training fits (:attr:`fitted_operator`)."""
         op = self.fitted_operator
         return self.render(origins, dirs, (op,))[op]
 
@@ -337,13 +277,11 @@ class NeuralSolver(IterativeSolver):
 
     def evaluate(self) -> dict:
         """Metrics now: temperature/sigma errors on the grid (when the truth is known), deflection errors."""
-        m = {"iteration": self.iteration, "wall_time_s": self.train_seconds, **self.field_errors(self.reconstruction())}
-        eps = self.predicted_deflections(self._eval_index)
-        obs = self.scene.eps[self._eval_index]
-        for n, e in eps.items():
-            m[f"deflection_rmse_{n}"] = deflection_rmse(e, obs)
+        ev = self.evaluation
+        m = {"iteration": self.iteration, "wall_time_s": self.train_seconds, **ev.field_errors(self.reconstruction()),
+             **ev.deflection_errors(self.render(*ev.train_rays()))}
         m["deflection_rmse"] = m[f"deflection_rmse_{self.fitted_operator}"]
-        m.update(self.heldout_errors())
+        m.update(ev.heldout_errors(self.predict))
         self.history.append(m)
         rmses = [h["deflection_rmse"] for h in self.history]
         if self.stop_tol is not None and len(rmses) > self.stop_patience:
@@ -367,7 +305,11 @@ class NeuralSolver(IterativeSolver):
         except RuntimeError as e:
             raise ValueError("the checkpoint was made with another field configuration (encoder/field settings "
                              f"differ): {str(e).splitlines()[0]}") from None
-        self.sampler.load_state_dict(st.get("sampler", {}))
+        try:
+            self.sampler.load_state_dict(st.get("sampler", {}))
+        except RuntimeError as e:
+            raise ValueError("the checkpoint was made with another sampler (sampler= or "
+                             f"field.occupancy_resolution differ): {str(e).splitlines()[0]}") from None
 
     def start_from(self, path: Path) -> None:
         """The previous frame's result (its averaged weights, or its trained ones when it kept no average) and

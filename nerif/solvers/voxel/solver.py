@@ -91,7 +91,6 @@ class CGLSSolver(IterativeSolver):
         faces, inside ``masks.volume`` where there is one."""
         super().setup(scene, masks)
         dt = self.dtype
-        self.scale = scene.ambient.delta_thre
         origins = scene.origins[scene.ray_views()].to(dt)
         projector = self.projector_name
         if projector == "auto":
@@ -108,7 +107,7 @@ class CGLSSolver(IterativeSolver):
             raise ValueError("CGLS has no unknowns: the 3-D mask is empty inside the ambient faces")
         self.unknowns = int(unknown.sum())
         mask = torch.as_tensor(unknown, dtype=dt, device=self.device)
-        b = (scene.eps / self.scale).to(dt)
+        b = scene.observed.to(dt)
         d = scene.dirs.to(dt)
         P = (lambda e: perpendicular(e, d)) if scene.perpendicular_only else (lambda e: e)  # symmetric: (P A)^T = A^T P
 
@@ -135,14 +134,15 @@ class CGLSSolver(IterativeSolver):
 
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
         d = dirs.to(self.dtype)
-        eps = voxel_deflection(self.cgls.solution(), self.scene.box, origins.to(self.dtype), d, self.step_mm) * self.scale
+        eps = voxel_deflection(self.cgls.solution(), self.scene.box, origins.to(self.dtype), d, self.step_mm)
         return perpendicular(eps, d) if self.scene.perpendicular_only else eps
 
     def evaluate(self) -> dict:
-        r = self.cgls.r * self.scale  # data residual [rad]
-        m = {"iteration": self.iteration, "wall_time_s": self.train_seconds, **self.field_errors(self.reconstruction()),
+        r = self.cgls.r * self.scene.scale  # data residual [rad]
+        ev = self.evaluation
+        m = {"iteration": self.iteration, "wall_time_s": self.train_seconds, **ev.field_errors(self.reconstruction()),
              "deflection_rmse": float((r.double() ** 2).sum(-1).mean().sqrt()),
-             "relative_residual": self.cgls.residual(), **self.heldout_errors()}
+             "relative_residual": self.cgls.residual(), **ev.heldout_errors(self.predict)}
         self.history.append(m)
         return m
 

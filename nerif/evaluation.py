@@ -1,0 +1,126 @@
+"""How every solver is scored, built once from the scene: the errors of a sigma volume against the truth, of
+deflections on fixed training rays, and of the held-out views (deflections and, where they are physical, the
+image displacements the cameras see).
+
+The solver is not part of it: it is given the solver's ``predict(origins, dirs) -> deflections of sigma``, so
+every solver is scored by the same code. What depends only on the data (the fixed ray subsets, the observed
+held-out displacements, the PSNR peaks) is computed here once.
+"""
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+import numpy as np
+import torch
+
+from nerif.data import Scene
+from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
+from nerif.sensing.displacement import view_displacements
+
+Predict = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (R, 3) origins [mm], dirs -> (R, 3) sigma units
+
+
+def fixed_rays(scene: Scene, per_view: int, seed: int) -> torch.Tensor:
+    """Up to ``per_view`` random rays of every view of ``scene`` (scene indices), the same for a given seed."""
+    g = torch.Generator().manual_seed(seed)
+    counts, starts = scene.view_counts().cpu(), scene.view_start.cpu()
+    idx = [s + torch.randperm(int(c), generator=g)[:per_view] for s, c in zip(starts[:-1], counts)]
+    return torch.cat(idx).to(scene.dirs.device)
+
+
+class Evaluation:
+    """The scores of a scene's reconstructions.
+
+    Args:
+        scene: the training scene, with its held-out views (``scene.heldout``) if any.
+        flame_threshold_K: flame region: ``|T_true - T0|`` above it.
+        eval_rays_per_view: fixed rays per view on which errors are followed during a run.
+        seed: draws the fixed rays (training views with ``seed + 1``, held-out views with ``seed + 2``).
+
+    Attributes:
+        train_index: (R,) the fixed training rays (scene indices).
+        heldout_index: (R_h,) the fixed held-out rays, or None.
+        heldout_displacements: (N_h, 2) observed displacements [px] of every held-out ray where deflections are
+            physical, else None.
+    """
+
+    def __init__(self, scene: Scene, flame_threshold_K: float, eval_rays_per_view: int, seed: int):
+        self.scene, self.flame_threshold_K = scene, float(flame_threshold_K)
+        self.train_index = fixed_rays(scene, eval_rays_per_view, seed + 1)
+        self.heldout_index, self.heldout_displacements, self.peaks = None, None, {}
+        h = scene.heldout
+        if h is not None:
+            self.heldout_index = fixed_rays(h, eval_rays_per_view, seed + 2)
+            self.peaks["deflection"] = value_range(h.eps)  # PSNR peaks: the range of every observation
+            if self.physical:
+                self.heldout_displacements = view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras)
+                self.peaks["displacement"] = value_range(self.heldout_displacements)
+
+    @property
+    def physical(self) -> bool:
+        """Whether deflections have physical units (radians), so that displacements [px] can be reported."""
+        return self.scene.ambient.temperature_known
+
+    def field_errors(self, sigma: np.ndarray) -> dict:
+        """Temperature and sigma errors of a sigma volume (nx, ny, nz) against the scene's truth (empty without
+        one)."""
+        if self.scene.truth_T is None:
+            return {}
+        amb, Tt = self.scene.ambient, self.scene.truth_T
+        T, sigma_true = amb.temperature_from_sigma(sigma), amb.sigma_from_temperature(Tt)
+        flame = flame_region(Tt, amb.T0, self.flame_threshold_K)
+        norm, sigma_rmse = float(np.sqrt(np.mean(sigma_true**2))), rmse(sigma, sigma_true)
+        return {"temperature_rmse_K": rmse(T, Tt),
+                "temperature_rmse_flame_K": rmse(T, Tt, flame) if flame.any() else None,  # None: no flame at all
+                "sigma_rmse": sigma_rmse,
+                "sigma_relative_error": sigma_rmse / norm if norm > 0 else None}  # |s - s_true| / |s_true|
+
+    def train_rays(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Origins and directions (R, 3) of the fixed training rays."""
+        s, i = self.scene, self.train_index
+        return s.origins[s.ray_views()[i]], s.dirs[i]
+
+    def deflection_errors(self, predicted: dict) -> dict:
+        """``deflection_rmse_<name>`` [rad] of each prediction (name -> (R, 3) sigma units on :meth:`train_rays`)
+        against the observations."""
+        obs = self.scene.eps[self.train_index]
+        return {f"deflection_rmse_{n}": deflection_rmse(e * self.scene.scale, obs) for n, e in predicted.items()}
+
+    def heldout_predictions(self, predict: Predict, index: Optional[torch.Tensor] = None) -> torch.Tensor:
+        """(R, 3) predicted deflections [rad] of the held-out rays ``index`` (default: all)."""
+        h = self.scene.heldout
+        index = torch.arange(len(h.dirs), device=h.dirs.device) if index is None else index
+        return predict(h.origins[h.ray_views()[index]], h.dirs[index]) * self.scene.scale
+
+    def heldout_errors(self, predict: Predict, every: bool = False, pred: Optional[torch.Tensor] = None) -> dict:
+        """Errors on the held-out views (empty without any): deflection RMSE [rad] and PSNR [dB] of predicted
+        against observed deflections and, where deflections are physical, the same for the image displacements
+        [px]. On the fixed held-out rays, or on ``every`` held-out ray (``pred``: their predictions [rad] when
+        already computed)."""
+        h = self.scene.heldout
+        if h is None:
+            return {}
+        index = torch.arange(len(h.dirs), device=h.dirs.device) if every else self.heldout_index
+        pred = self.heldout_predictions(predict, index) if pred is None else pred
+        obs = h.eps[index]
+        m = {"heldout_deflection_rmse": deflection_rmse(pred, obs),
+             "heldout_psnr_db": psnr_db(pred, obs, self.peaks["deflection"])}
+        if self.physical:
+            u_pred = view_displacements(pred, h.dirs[index], h.ray_views()[index], h.cameras)
+            u_obs = self.heldout_displacements[index]
+            m.update(heldout_displacement_rmse_px=deflection_rmse(u_pred, u_obs),
+                     heldout_displacement_psnr_db=psnr_db(u_pred, u_obs, self.peaks["displacement"]))
+        return m
+
+    def heldout_images(self, pred: torch.Tensor) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per held-out view, (observed, predicted) on its pixel grid, NaN where it has no ray: displacements
+        [px] (height, width, 2) where physical, else deflections (height, width, 3); ``pred``: (N_h, 3)
+        predictions [rad] of every held-out ray."""
+        h = self.scene.heldout
+        obs = self.heldout_displacements if self.physical else h.eps
+        pred = view_displacements(pred, h.dirs, h.ray_views(), h.cameras) if self.physical else pred
+        out = []
+        for v in range(h.n_views):
+            sl = h.view_slice(v)
+            out.append(tuple(h.view_image(v, x[sl].detach().cpu().double().numpy(), np.nan) for x in (obs, pred)))
+        return out

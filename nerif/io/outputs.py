@@ -1,0 +1,117 @@
+"""Every file a reconstruction writes: the volumes (``.npz``, ``.vti``), the masks, the sensing record, slice and
+curve images, the held-out views' figures, the final metrics, and the one summary line a run prints.
+
+The writers take a finished solver (its ``reconstruction()``, ``history``, ``evaluation``, ``timing()``) and
+its scene; they compute no score of their own: :class:`nerif.evaluation.Evaluation` does.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from nerif.io.export import write_npz, write_png, write_vti
+from nerif.io.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
+
+
+def write_masks(masks, scene, out_dir: Path) -> None:
+    """2-D masks as PNGs (one per view) and the 3-D mask as a volume."""
+    for v, img in enumerate(masks.images or []):
+        write_png(out_dir / "masks" / f"mask2d_view{v:02d}.png", img.astype(np.uint8) * 255)
+    if masks.volume is not None:
+        origin = [float(a[0]) for a in scene.box.axes()]
+        write_npz(out_dir / "mask3d.npz", mask=masks.volume, voxel_mm=scene.box.voxel_mm, origin_mm=np.asarray(origin))
+        write_vti(out_dir / "mask3d.vti", scene.box.voxel_mm, origin, mask=masks.volume.astype(np.float32))
+
+
+def write_sensing(scene, out_dir: Path) -> None:
+    """Realistic sensing, per view: the reference and distorted images (8-bit PNG, as a camera would save
+    them) and a figure of images and displacements."""
+    rec = scene.sensing
+    if rec is None:
+        return
+    for v, cam in enumerate(scene.cameras):
+        write_png(out_dir / "sensing" / f"reference_view{v:02d}.png", rec["reference"][v])
+        write_png(out_dir / "sensing" / f"distorted_view{v:02d}.png", rec["distorted"][v])
+        save_figure(sensing_figure(rec, v, title=f"{cam.name}: displacement RMSE of the flow "
+                                   f"{float(rec['displacement_rmse_px']):.3f} px (all views)"),
+                    out_dir / "sensing" / f"view{v:02d}.png")
+
+
+def volume_slices(sigma: np.ndarray, scene, title: str):
+    """Slices of the temperature (with the truth where known), or of sigma when no temperature can be inferred."""
+    if not scene.ambient.temperature_known:
+        return slice_figure(sigma, scene.box, None, title, unit="sigma", hot=-1)
+    return slice_figure(scene.ambient.temperature_from_sigma(sigma), scene.box, scene.truth_T, title)
+
+
+def write_heldout(solver, out_dir: Path) -> dict:
+    """Predictions on every held-out ray: their errors, and per view a figure of observed, predicted and
+    difference (image displacements [px] where deflections are physical, else deflections)."""
+    ev = solver.evaluation
+    pred = ev.heldout_predictions(solver.predict)
+    unit = "px" if ev.physical else "sigma"
+    for v, (obs, predicted) in enumerate(ev.heldout_images(pred)):
+        save_figure(heldout_figure(obs, predicted, unit=unit, title=f"held out: {ev.scene.heldout.cameras[v].name}"),
+                    out_dir / "heldout" / f"view{v:02d}.png")
+    return ev.heldout_errors(solver.predict, every=True, pred=pred)
+
+
+def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
+    """Volumes (.npz, .vti), slice and curve PNGs, held-out figures, and the metrics of the final state."""
+    amb, box = scene.ambient, scene.box
+    sigma = solver.reconstruction()
+    vols = {"sigma": sigma}
+    if amb.temperature_known:
+        vols.update(T=amb.temperature_from_sigma(sigma), n=amb.n_from_sigma(sigma), delta=sigma * amb.delta_thre)
+    if scene.truth_T is not None:
+        vols["T_true"] = scene.truth_T
+    origin = [float(a[0]) for a in box.axes()]
+    write_npz(out_dir / "reconstruction.npz", voxel_mm=box.voxel_mm, origin_mm=np.asarray(origin), T0=amb.T0, n0=amb.n0,
+              delta_thre=amb.delta_thre, **vols)
+    write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, **vols)
+    label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
+    save_figure(volume_slices(sigma, scene, f"{label}, {solver.iteration} iterations"), out_dir / "slices.png")
+    save_figure(curves_figure(solver.history, losses), out_dir / "curves.png")
+    final = dict(solver.history[-1]) if solver.history else solver.evaluate()
+    final.pop("iteration", None)
+    if scene.heldout is not None:
+        final.update(write_heldout(solver, out_dir))  # every held-out ray, not the evaluation subset
+    if not amb.temperature_known:
+        final["deflection_unit"] = "sigma (the data are deflections of sigma; no temperature is inferred)"
+    final.update(solver.timing())
+    final["wall_time_s"] = solver.train_seconds
+    final["history"] = solver.history
+    final.update(solver.labels)
+    final.update(solver.report)
+    final.update(solver.saturation(sigma))
+    if scene.sensing is not None:
+        final["displacement_rmse_px"] = float(scene.sensing["displacement_rmse_px"])
+        final["circle_of_confusion_px"] = float(scene.sensing["circle_of_confusion_px"])
+    if amb.temperature_known:
+        final["temperature_note"] = ("temperature from n assuming an air-dominated gas of fixed composition "
+                                     "(n - 1 = T0 (n0 - 1) / T)")
+    return final
+
+
+def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
+    """One line of the run's headline figures, each named as in ``metrics.json`` (after ``prefix``)."""
+    def known(k):
+        return m.get(k) is not None and np.isfinite(m[k])
+
+    parts = []
+    if known("temperature_rmse_K"):
+        flame = f" (flame {m['temperature_rmse_flame_K']:.1f} K)" if known("temperature_rmse_flame_K") else ""
+        parts.append(f"T RMSE {m['temperature_rmse_K']:.1f} K{flame}")
+    unit = "sigma" if "deflection_unit" in m else "rad"
+    parts.append(f"deflection RMSE {m['deflection_rmse']:.3g} {unit}")
+    if known("heldout_deflection_rmse"):
+        held = [f"deflection RMSE {m['heldout_deflection_rmse']:.3g} {unit}, PSNR {m['heldout_psnr_db']:.1f} dB"]
+        if known("heldout_displacement_rmse_px"):
+            held.append(f"displacement RMSE {m['heldout_displacement_rmse_px']:.3g} px, PSNR "
+                        f"{m['heldout_displacement_psnr_db']:.1f} dB")
+        parts.append("held out: " + "; ".join(held))
+    parts += [f"WARNING: {w}" for w in m.get("warnings", [])]
+    parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training ({m['ms_per_iteration']:.1f} ms/it), "
+                 f"{m['total_time_s']:.0f} s in all")
+    return "nerif: " + prefix + " | ".join(parts) + f" | {out_dir}"

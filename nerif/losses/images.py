@@ -1,0 +1,89 @@
+"""The image data term's building blocks: the photometric residual of a warped reference image, displacements
+interpolated inside a cell of the ray grid, and the scale that puts the residual in the unit of a deflection
+misfit.
+
+Brightness constancy: pixel ``x`` of the distorted image shows the reference background at ``x + u(x)``, so
+``r(x) = I_ref(x + u(x)) - I_dist(x)`` is sensor noise where ``u`` is right. Near the right ``u``,
+``r = grad I_ref . du + noise``: averaged over the direction of du, ``E[r^2] = |grad I|^2 / 2 |du|^2 + 2 noise^2``,
+which :func:`photometric_scale` turns into the squared deflection misfit it stands for.
+"""
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+import torch
+
+from nerif.sensing.imaging import sample
+
+
+def cell_weights(b: int, dtype=torch.float32, device=None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Bilinear weights of the ``b x b`` image pixels between the centres of 2 x 2 adjacent rays of a grid binned
+    ``b`` times coarser than the image, and those pixels' offsets from the top-left ray's pixel.
+
+    A ray of coarse pixel (row i, column j) sits at the image point ``b j + (b - 1) / 2`` (column; the same for
+    rows). The image pixels from that point to the next ray's (exclusive) are at ``ceil(b j + (b - 1) / 2) + k``,
+    k < b, a fraction ``(k + o) / b`` of the way, ``o = 1/2`` for even b, 0 for odd b.
+
+    Returns:
+        weights (b * b, 4) of the corners (top-left, top-right, bottom-left, bottom-right), pixels row-major;
+        offsets (b * b, 2) [px] (column, row) of each pixel from the cell's first pixel (:func:`cell_origin`).
+    """
+    o = 0.5 if b % 2 == 0 else 0.0
+    t = (torch.arange(b, dtype=dtype, device=device) + o) / b
+    ty, tx = torch.meshgrid(t, t, indexing="ij")
+    tx, ty = tx.reshape(-1), ty.reshape(-1)
+    weights = torch.stack([(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty], -1)
+    k = torch.arange(b, dtype=dtype, device=device)
+    ky, kx = torch.meshgrid(k, k, indexing="ij")
+    return weights, torch.stack([kx.reshape(-1), ky.reshape(-1)], -1)
+
+
+def cell_origin(pixel: torch.Tensor, width: int, b: int) -> torch.Tensor:
+    """(C,) flat coarse-pixel index of each cell's top-left ray (``row * width + column`` on a grid ``width``
+    wide) -> (C, 2) the image pixel (column, row) of its first image pixel (:func:`cell_weights`)."""
+    first = math.ceil((b - 1) / 2)  # ceil(b j + (b - 1) / 2) = b j + ceil((b - 1) / 2)
+    rc = torch.stack([pixel % width, torch.div(pixel, width, rounding_mode="floor")], -1)
+    return rc * b + first
+
+
+def photometric_residual(reference: torch.Tensor, distorted: torch.Tensor, x: torch.Tensor, u: torch.Tensor,
+                         mode: str = "bicubic") -> torch.Tensor:
+    """``I_ref(x + u) - I_dist(x)`` at integer image pixels ``x`` (P, 2) (column, row) with displacements ``u``
+    (P, 2) [px], differentiable in ``u``. Images (H, W). Returns (P,)."""
+    W = distorted.shape[1]
+    xi = x.long()
+    observed = distorted.reshape(-1)[xi[:, 1] * W + xi[:, 0]]
+    return sample(reference, x.to(u.dtype) + u, mode) - observed
+
+
+def photometric_scale(reference: torch.Tensor, gain: torch.Tensor, step_px: float = 0.05, mode: str = "bicubic") -> float:
+    """What one unit of squared residual is worth in squared deflection units: the mean squared change of the
+    reference image per px^2 of displacement, averaged over the two directions, measured as the residual sees it
+    (the image shifted ``step_px`` with the same interpolation, from points at random sub-pixel positions:
+    differences on the pixel grid underestimate the gradient of a texture a few pixels fine, by 4x at 5 px, and
+    the interpolant's gradient is larger at the pixel centres than between them), times ``mean |A|_F^2 / 2``
+    (px^2 per squared unit of deflection; ``gain``: (N, 2, 3) the displacement matrices of the view's rays), so
+    that the image term's weight is the flow term's."""
+    H, W = reference.shape
+    rows, cols = torch.meshgrid(torch.arange(2, H - 3, dtype=torch.float64, device=reference.device),
+                                torch.arange(2, W - 3, dtype=torch.float64, device=reference.device), indexing="ij")
+    x = torch.stack([cols.reshape(-1), rows.reshape(-1)], -1)
+    x = x + torch.rand(x.shape, generator=torch.Generator().manual_seed(0), dtype=x.dtype).to(x.device)
+    ref = reference.double()
+    base = sample(ref, x, mode)
+    per_px2 = [float((sample(ref, x + step_px * x.new_tensor(e), mode) - base).pow(2).mean()) / step_px**2
+               for e in ((1.0, 0.0), (0.0, 1.0))]
+    return sum(per_px2) / 2 * float(gain.double().pow(2).sum((-2, -1)).mean()) / 2
+
+
+def highpass(image: torch.Tensor, sigma_px: Optional[float]) -> torch.Tensor:
+    """``image`` less its Gaussian blur of ``sigma_px`` [px] (None or 0: the image itself): removes a smooth
+    brightness change (illumination drift, the flame's own light) while keeping the background's texture."""
+    if not sigma_px:
+        return image
+    import kornia
+
+    k = 2 * int(3 * sigma_px + 0.5) + 1
+    blur = kornia.filters.gaussian_blur2d(image[None, None], (k, k), (sigma_px, sigma_px), border_type="reflect")
+    return image - blur[0, 0]

@@ -1,0 +1,76 @@
+"""The data terms of the neural solver: what each fits, drawn and scored on a tiny scene with its images."""
+import numpy as np
+import pytest
+import torch
+
+from nerif.configs import group
+from nerif.data import DATASETS
+from nerif.data.phantoms import PHANTOMS
+from nerif.renderers.voxel import voxel_deflection
+from nerif.solvers.batches import RayBatcher
+from nerif.solvers.data_terms import DATA_TERMS
+from tests.helpers import solver, tiny_config
+
+REALISTIC = ("data.sensing=realistic", "data.sensor.aperture_rays=1", "data.sensor.image_binning=4",
+             "phantom.width_mm=9.0")
+
+
+@pytest.fixture(scope="module")
+def realistic():
+    cfg = tiny_config(*REALISTIC)
+    return cfg, DATASETS.build(group(cfg, "data"))
+
+
+def image_term(scene, **settings):
+    batches = RayBatcher(scene, None, 256, "all", 0.0, torch.Generator().manual_seed(0))
+    cfg = {"name": "images", "flow_warmup": 0.0, "highpass_px": 8.0, "interpolation": "bicubic", **settings}
+    return DATA_TERMS.build(cfg).setup(scene, batches, 100)
+
+
+def test_the_image_term_is_least_at_the_true_field_below_the_flows_deflections(realistic):
+    """Rendered from the true field, the deflections of a batch's cells explain the images better than half or
+    1.5 times them, and better than the optical flow's own estimates: the chain rays -> displacements [image px]
+    -> warped reference has the right signs, gains and pixel positions."""
+    cfg, scene = realistic
+    ph = PHANTOMS.build(group(cfg, "phantom"))
+    term = image_term(scene)
+    batch = term.draw(0)
+    assert len(batch.index) == 4 * (256 // 4)  # 64 cells of 2 x 2 rays
+    eps = voxel_deflection(torch.as_tensor(ph.delta, dtype=torch.float32), ph.box, batch.origins, batch.dirs)
+    eps = eps / scene.scale
+
+    def cost(e):
+        return float(term.terms({"discrete": e}, batch, 0)["discrete"])
+
+    truth = cost(eps)
+    assert truth < 0.6 * cost(scene.observed[batch.index])  # the flow's error is what the images do not show
+    assert truth < 0.6 * min(cost(0.5 * eps), cost(1.5 * eps)) and truth < 0.2 * cost(0 * eps)
+
+
+def test_the_image_term_starts_on_the_flows_deflections_for_its_warm_up(realistic):
+    cfg, scene = realistic
+    term = image_term(scene, flow_warmup=0.3)
+    flow = DATA_TERMS.build({"name": "flow"}).setup(scene, term.flow.batches, 100)
+    first = term.draw(29)
+    assert len(first.index) == 256  # rays, not cells, until iteration 30
+    e = {"discrete": torch.zeros(len(first.index), 3)}
+    assert term.terms(e, first, 29) == flow.terms(e, first, 29)
+    assert len(term.draw(30).index) == 256  # 64 cells of 4 rays: the same rendering cost per step
+
+
+def test_the_image_term_needs_images_and_says_where_to_get_them():
+    cfg = tiny_config()
+    scene = DATASETS.build(group(cfg, "data"))
+    with pytest.raises(ValueError, match="data.sensing=realistic"):
+        image_term(scene)
+
+
+def test_training_on_the_images_runs_and_lowers_the_image_misfit(realistic):
+    cfg, _ = realistic
+    cfg = tiny_config(*REALISTIC, "data_term=images", "data_term.flow_warmup=0", "train.iterations=30")
+    scene = DATASETS.build(group(cfg, "data"))
+    torch.manual_seed(0)
+    s = solver(cfg, scene)
+    losses = [s.step()["loss_discrete"] for _ in range(30)]
+    assert np.isfinite(losses).all() and np.mean(losses[-5:]) < 0.8 * np.mean(losses[:5])
+    assert s.labels["data_term"] == "images"
