@@ -15,7 +15,8 @@ import torch
 
 from nerif.data import Scene
 from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
-from nerif.sensing.displacement import view_displacements
+from nerif.losses.images import block_pixels, photometric_residual
+from nerif.sensing.displacement import deflection_to_displacement, view_displacements
 
 Predict = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (R, 3) origins [mm], dirs -> (R, 3) sigma units
 
@@ -110,7 +111,28 @@ class Evaluation:
             u_obs = self.heldout_displacements[index]
             m.update(heldout_displacement_rmse_px=deflection_rmse(u_pred, u_obs),
                      heldout_displacement_psnr_db=psnr_db(u_pred, u_obs, self.peaks["displacement"]))
+        if h.images is not None:
+            m["heldout_photometric_rmse"] = self.photometric_rmse(index, pred)
+            if every:  # what the flow's displacements and none leave, for comparison
+                m["heldout_photometric_rmse_flow"] = self.photometric_rmse(index, obs)
+                m["heldout_photometric_rmse_none"] = self.photometric_rmse(index, torch.zeros_like(obs))
         return m
+
+    def photometric_rmse(self, index: torch.Tensor, eps: torch.Tensor) -> float:
+        """RMS over the image pixels of held-out rays ``index`` of ``I_ref(x + u) - I_dist(x)`` [image intensity,
+        full range 1], ``u`` the displacement of deflections ``eps`` [rad] (R, 3), the same over each ray's block
+        of image pixels: how well the deflections explain the held-out images themselves, whatever the flow says."""
+        h = self.scene.heldout
+        views, total, count = h.ray_views()[index], 0.0, 0
+        for v in views.unique().tolist():
+            sel, im, cam = views == v, h.images[v], h.cameras[v]
+            b = max(1, cam.binning // im.camera.binning)
+            u = deflection_to_displacement(eps[sel].double(), h.dirs[index[sel]].double(), im.camera)
+            x = block_pixels(h.pixel[index[sel]], cam.width, b)  # (R, b^2, 2)
+            u = u[:, None, :].expand(-1, x.shape[1], -1)
+            r = photometric_residual(im.reference.double(), im.distorted.double(), x.reshape(-1, 2), u.reshape(-1, 2))
+            total, count = total + float(r.pow(2).sum()), count + r.numel()
+        return (total / max(count, 1)) ** 0.5
 
     def heldout_images(self, pred: torch.Tensor) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per held-out view, (observed, predicted) on its pixel grid, NaN where it has no ray: displacements

@@ -30,3 +30,23 @@ def test_realistic_sensing_is_seeded_and_records_what_it_saw():
     target = perpendicular(ideal.eps, ideal.dirs)
     assert torch.isfinite(a.eps).all() and 0 < float((a.eps - target).norm() / target.norm()) < 0.5
     assert float((a.eps * a.dirs).sum(-1).abs().max()) < 1e-6 * float(a.eps.norm(dim=-1).max())
+
+
+def test_the_flames_light_and_a_gain_drift_change_only_the_distorted_image_as_set():
+    """Luminosity: light added to the distorted exposure, brightest (the given fraction of the background's mean)
+    where the flame's projection is largest and none outside it; gain drift: that exposure scaled. The reference
+    image and the deflections' geometry stay; the scene carries both images for the image data term."""
+    quiet = dict(REALISTIC["sensor"], noise_variance=0.0)
+    plain = DATASETS.build(dict(REALISTIC, sensor=quiet))
+    lit = DATASETS.build(dict(REALISTIC, sensor=dict(quiet, luminosity=0.3)))
+    drift = DATASETS.build(dict(REALISTIC, sensor=dict(quiet, gain_drift=0.1)))
+    for s in (lit, drift):
+        np.testing.assert_array_equal(s.sensing["reference"], plain.sensing["reference"])
+    ref = plain.images[0].reference.double()
+    glow = (lit.images[0].distorted - plain.images[0].distorted).double()
+    assert abs(float(glow.max()) - 0.3 * float(ref.mean())) < 2.5 / 255  # 8-bit images
+    assert float(glow[:, :5].abs().max()) <= 1.0 / 255  # the image's edge columns see no flame
+    unclipped = drift.images[0].distorted < 250 / 255  # 8-bit: brighter pixels saturate
+    ratio = drift.images[0].distorted[unclipped].double().sum() / plain.images[0].distorted[unclipped].double().sum()
+    assert abs(float(ratio) - 1.1) < 0.01
+    assert plain.images[0].reference.shape == (160, 90) and plain.images[0].camera.binning == 8

@@ -54,7 +54,7 @@ import torch
 import yaml
 
 from nerif.data.frames import FRAMES, Frame, pick_frames
-from nerif.data.folders import blocks_inside, dataset_folder, region_of_interest
+from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest
 from nerif.data.scene import DATASETS, Scene, ViewImages, heldout_views, scene_from_images
 from nerif.geometry import ProbeBox, arc_rig, rays_in_box
 from nerif.io.export import atomic_write, write_png
@@ -248,7 +248,7 @@ def capture_frames(root: str, frames=None, **_) -> Optional[list[Frame]]:
 
 @DATASETS.register("capture")
 def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = None, frames=None,
-            frame: Optional[int] = None, device: str = "cpu") -> Scene:
+            frame: Optional[int] = None, truth: Optional[str] = None, device: str = "cpu") -> Scene:
     """A capture folder -> scene of the training views, with the held-out views as ``scene.heldout``.
 
     Args:
@@ -257,6 +257,8 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
         heldout: views never trained on (overrides the rig file's ``heldout``; default: the last view).
         frames: the frames of a time series (:func:`capture_frames`); ``frame``: the one to build (None: the
             first of the folder).
+        truth: a volume file of the true temperature [K] on the probe grid, for a rendered capture (its array
+            ``T``): every error against the truth is then reported. None for a real experiment.
     """
     root = dataset_folder(root)
     rig = read_rig(root)
@@ -274,6 +276,7 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
                       float(rig.get("T_max", 2000.0)))
     held = heldout_views(heldout if heldout is not None else rig.get("heldout", [len(cameras) - 1]), len(cameras))
     prior = sigma_prior(rig, ambient, root)
+    truth_T = read_truth(truth, box) if truth is not None else None
     rays = rays_in_box(box, cameras, device)  # a camera that does not see the box fails here, before the flow
     pixel, starts = rays[2].cpu(), rays[3].cpu()
     for v, cam in enumerate(cameras):
@@ -296,7 +299,7 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
     views = [ViewImages(torch.as_tensor(r, device=device), torch.as_tensor(i, device=device), cam)
              for r, i, cam in zip(refs, images, full)]
     scene = scene_from_images(box, ambient, cameras, eps_images, [valid] * len(cameras), device=device, rays=rays,
-                              sigma_prior=prior, images=views)
+                              sigma_prior=prior, images=views, truth_T=truth_T)
     return scene.split_views(held)
 
 

@@ -1,5 +1,6 @@
 """Checks shared by the readers of real data (:mod:`nerif.data.capture`, :mod:`nerif.data.transforms`): the
-dataset folder, a region of interest on the sensor, and displacement estimates that are not finite."""
+dataset folder, a region of interest on the sensor, displacement estimates that are not finite, and the true
+temperature of a rendered dataset."""
 from __future__ import annotations
 
 import logging
@@ -7,6 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
+from nerif.data.phantoms import read_volume
+from nerif.geometry import ProbeBox
+from nerif.physics import check_temperature
 from nerif.sensing.imaging import resample
 
 log = logging.getLogger(__name__)
@@ -46,3 +50,18 @@ def finite_or_masked(u: np.ndarray, what: str) -> np.ndarray:
     return ok
 
 
+
+
+def read_truth(path, box: ProbeBox) -> np.ndarray:
+    """``data.truth``: the true temperature [K] on the probe grid (nx, ny, nz), from a volume file (``.npy``, or
+    the array ``T`` of a file holding several); one sentence when it is not one or does not fit the grid."""
+    try:
+        T = read_volume(path, "data.truth")
+    except ValueError as e:
+        if "holds" not in str(e):
+            raise
+        T = read_volume(path, "data.truth", key="T")
+    if T.shape != tuple(box.shape):
+        raise ValueError(f"data.truth {path} has shape {T.shape}, the probe grid is {tuple(box.shape)}")
+    check_temperature(T, f"data.truth {path}")
+    return T

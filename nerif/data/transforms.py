@@ -24,12 +24,11 @@ from typing import Optional
 import cv2
 import numpy as np
 
-from nerif.data.phantoms import read_volume
-from nerif.data.folders import blocks_inside, dataset_folder, region_of_interest
+from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest
 from nerif.data.scene import DATASETS, Scene, scene_from_images
 from nerif.geometry import Camera, ProbeBox, camera_from_nerf_pose
 from nerif.io.export import atomic_write, write_png
-from nerif.physics import Ambient, check_temperature
+from nerif.physics import Ambient
 from nerif.sensing.imaging import resample
 
 _KEYS = ("fl_x", "cx", "cy", "w", "h", "image_min", "image_max", "frames")
@@ -140,11 +139,7 @@ def transforms(root: str, probe: dict, T0: float, n0: float, *, sigma_prior: Opt
         if T_max is None:
             raise ValueError("data.truth is a temperature volume: set data.T_max (the temperature of sigma = -1 "
                              "the dataset was rendered with) to compare against it")
-        truth_T = read_volume(truth, "data.truth")
-        if truth_T.shape != box.shape:
-            raise ValueError(f"data.truth {truth} has shape {truth_T.shape}, the probe grid is {box.shape} "
-                             "(data.probe.shape)")
-        check_temperature(truth_T, f"data.truth {truth}")
+        truth_T = read_truth(truth, box)
     cams = optics(pitch_um, focal_mm, f_number, background_mm)
     scene = load_views(root, "train", box, ambient, cams, binning, device, truth_T=truth_T,
                        sigma_prior=tuple(float(x) for x in sigma_prior) if sigma_prior is not None else None)

@@ -110,6 +110,10 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
         if known("heldout_displacement_rmse_px"):
             held.append(f"displacement RMSE {m['heldout_displacement_rmse_px']:.3g} px, PSNR "
                         f"{m['heldout_displacement_psnr_db']:.1f} dB")
+        if known("heldout_photometric_rmse"):
+            ref = (f" (the flow's {100 * m['heldout_photometric_rmse_flow']:.2f} %, none "
+                   f"{100 * m['heldout_photometric_rmse_none']:.2f} %)" if known("heldout_photometric_rmse_flow") else "")
+            held.append(f"image residual {100 * m['heldout_photometric_rmse']:.2f} % of full range{ref}")
         parts.append("held out: " + "; ".join(held))
     parts += [f"WARNING: {w}" for w in m.get("warnings", [])]
     parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training ({m['ms_per_iteration']:.1f} ms/it), "

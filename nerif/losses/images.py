@@ -47,6 +47,15 @@ def cell_origin(pixel: torch.Tensor, width: int, b: int) -> torch.Tensor:
     return rc * b + first
 
 
+def block_pixels(pixel: torch.Tensor, width: int, b: int) -> torch.Tensor:
+    """(N,) flat coarse-pixel indices on a grid ``width`` wide -> (N, b * b, 2) the image pixels (column, row)
+    of each one's ``b x b`` block."""
+    k = torch.arange(b, device=pixel.device)
+    ky, kx = torch.meshgrid(k, k, indexing="ij")
+    rc = torch.stack([pixel % width, torch.div(pixel, width, rounding_mode="floor")], -1)
+    return rc[:, None, :] * b + torch.stack([kx.reshape(-1), ky.reshape(-1)], -1)[None]
+
+
 def photometric_residual(reference: torch.Tensor, distorted: torch.Tensor, x: torch.Tensor, u: torch.Tensor,
                          mode: str = "bicubic") -> torch.Tensor:
     """``I_ref(x + u) - I_dist(x)`` at integer image pixels ``x`` (P, 2) (column, row) with displacements ``u``

@@ -40,10 +40,16 @@ def voxel_deflection(delta: torch.Tensor, box: ProbeBox, origins: torch.Tensor, 
     Returns:
         (R, 3) world-frame deflection [rad for delta]; zero for rays that miss the box.
     """
+    return line_integral(gradient_volume(delta, box.voxel_mm), box, origins, dirs, step_mm, chunk)
+
+
+def line_integral(volume: torch.Tensor, box: ProbeBox, origins: torch.Tensor, dirs: torch.Tensor,
+                  step_mm: float | None = None, chunk: int = 1 << 15) -> torch.Tensor:
+    """Integrals of a voxel field (C, nx, ny, nz) along thin rays (R, 3), trilinear, with the voxel forward
+    model's quadrature (:func:`chord_sampler`): (R, C) [field units x mm]; zero for rays that miss the box."""
     sampler = chord_sampler(box, step_mm)
-    grad = gradient_volume(delta, box.voxel_mm)
     out = []
     for i in range(0, len(origins), chunk):
         s = sampler(box, origins[i:i + chunk], dirs[i:i + chunk])
-        out.append(integrate(sample_volume(grad, box, s.positions.to(grad.dtype), padding="border"), s))
-    return torch.cat(out) if out else grad.new_zeros(0, 3)
+        out.append(integrate(sample_volume(volume, box, s.positions.to(volume.dtype), padding="border"), s))
+    return torch.cat(out) if out else volume.new_zeros(0, volume.shape[0])

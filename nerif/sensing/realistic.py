@@ -22,7 +22,7 @@ import torch
 
 from nerif.cache import cached_arrays
 from nerif.geometry import Camera, ProbeBox
-from nerif.renderers.voxel import voxel_deflection
+from nerif.renderers.voxel import line_integral, voxel_deflection
 from nerif.sensing.displacement import deflection_to_displacement, displacement_to_deflection
 from nerif.sensing.flow import FLOW
 from nerif.sensing.imaging import add_noise, diffraction_blur, resample, to_uint8, warp
@@ -59,7 +59,8 @@ def aperture_deflection(delta: torch.Tensor, box: ProbeBox, camera: Camera, dirs
 def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: torch.Tensor, pixel: torch.Tensor,
               view_start: torch.Tensor, step_mm: Optional[float], rig_binning: int, pattern: dict, flow: dict,
               aperture_rays: int = 60, wavelength_um: float = 0.5, noise_variance: float = 0.0,
-              image_binning: int = 1, render_binning: Optional[int] = None, seed: int = 0, cache_dir=None):
+              image_binning: int = 1, render_binning: Optional[int] = None, seed: int = 0, luminosity: float = 0.0,
+              gain_drift: float = 0.0, cache_dir=None):
     """Observed deflections of the training rays through the realistic BOS chain.
 
     Args:
@@ -67,6 +68,11 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         dirs, pixel, view_start: the training rays (see :class:`nerif.data.scene.Scene`).
         pattern, flow: configs of a :data:`PATTERNS` and a :data:`FLOW` entry.
         noise_variance: variance of the additive Gaussian noise on each image (intensities in [0, 1]).
+        luminosity: the flame's own light added to the distorted image, at its brightest this fraction of the
+            background's mean brightness, shaped like the flame's projection (the line integral of ``|delta|``
+            along each pixel's ray).
+        gain_drift: the distorted exposure's brightness over the reference's, less 1 (illumination drift):
+            0.1 = 10 % brighter.
         step_mm: quadrature step of the aperture rays (default: one voxel of ``delta``; the aperture average
             is as accurate with it as with half a voxel, to 2e-5 on Phantom 5, at half the cost).
         cache_dir: where the aperture renderings (the costly part) are cached, keyed by the field and the
@@ -81,6 +87,9 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
     PATTERNS.get(pattern["name"]), FLOW.get(flow["name"])
     if noise_variance < 0:
         raise ValueError(f"noise variance must be >= 0, got {noise_variance}")
+    if not luminosity >= 0 or not gain_drift > -1:
+        raise ValueError(f"data.sensor.luminosity={luminosity} must be at least 0 and data.sensor.gain_drift="
+                         f"{gain_drift} above -1")
     aperture_points(aperture_rays, 1.0)
     for b, what in ((image_binning, "image_binning"), (render_binning, "render_binning")):
         if b < 1 or rig_binning % b and b % rig_binning:
@@ -111,7 +120,13 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         u_img = torch.as_tensor(resample(u_ren, H, W))
         d_diff = coc["d_diff_mm"] / img_cam.pitch_mm
         reference = add_noise(diffraction_blur(background, d_diff), noise_variance, gen).numpy()
-        distorted = add_noise(diffraction_blur(warp(background, u_img), d_diff), noise_variance, gen).numpy()
+        distorted = diffraction_blur(warp(background, u_img), d_diff) * (1.0 + gain_drift)
+        if luminosity > 0:  # the flame's own light, on the distorted exposure only
+            glow = line_integral(delta.abs()[None], box, torch.as_tensor(ren_cam.position, dtype=delta.dtype,
+                                 device=delta.device).expand(len(d_ren), 3), d_ren.to(delta.dtype), step_mm)
+            glow = resample(glow.reshape(ren_cam.height, ren_cam.width).cpu().numpy().astype(np.float32), H, W)
+            distorted = distorted + luminosity * float(background.mean()) * torch.as_tensor(glow) / max(float(glow.max()), 1e-30)
+        distorted = add_noise(distorted, noise_variance, gen).numpy()
         u_est = FLOW.build(flow, distorted=distorted, reference=reference)
 
         u_true_t = resample(u_ren, cam.height, cam.width)

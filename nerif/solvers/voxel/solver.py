@@ -14,6 +14,7 @@ from nerif.renderers.voxel import voxel_deflection
 from nerif.solvers.base import SOLVERS, IterativeSolver, check_faces
 from nerif.solvers.voxel.cgls import CGLS, REGULARIZERS
 from nerif.solvers.voxel.projector import PROJECTORS, SparseProjector
+from nerif.solvers.voxel.unified import unified_system
 
 
 def boundary_mask(shape, faces) -> np.ndarray:
@@ -66,7 +67,8 @@ class CGLSSolver(IterativeSolver):
     def __init__(self, *, iterations: int, eval_every: int, regularizer: str, lam: float, tol: Optional[float],
                  reweight_every: int, tv_eps: float, ambient_faces, crossed_cover: float, ambient_fallback,
                  projector: str, max_matrix_gib: float,
-                 step_mm: Optional[float], chunk: int, dtype: str, metrics: Mapping, seed: int, label: str):
+                 step_mm: Optional[float], chunk: int, dtype: str, metrics: Mapping, seed: int, label: str,
+                 data_term: Optional[Mapping] = None, linearize_at: str = "flow"):
         super().__init__(iterations=iterations, eval_every=eval_every, metrics=metrics, seed=seed, label=label)
         if not lam >= 0:
             raise ValueError(f"solver.lam={lam}: a regularisation weight is at least 0")
@@ -84,7 +86,15 @@ class CGLSSolver(IterativeSolver):
         self.crossed_cover = float(crossed_cover)
         self.projector_name, self.max_matrix_gib = projector, float(max_matrix_gib)
         self.step_mm, self.chunk, self.dtype = step_mm, int(chunk), getattr(torch, dtype)
+        self.data_term = dict(data_term or {"name": "flow"})
+        if self.data_term["name"] not in ("flow", "images"):
+            raise ValueError(f"solver=cgls fits data_term=flow or images (unified BOS), got '{self.data_term['name']}'")
+        if linearize_at not in ("zero", "flow"):
+            raise ValueError(f"solver.linearize_at must be zero or flow, got '{linearize_at}'")
+        self.linearize_at = linearize_at
         self.labels.update(regularizer=regularizer, lam=float(lam))
+        if self.data_term["name"] == "images":
+            self.labels["data_term"] = "images"
 
     def setup(self, scene, masks) -> "CGLSSolver":
         """Build the projector for every ray of ``scene`` and the CGLS state; unknowns: the voxels off the ambient
@@ -107,15 +117,22 @@ class CGLSSolver(IterativeSolver):
             raise ValueError("CGLS has no unknowns: the 3-D mask is empty inside the ambient faces")
         self.unknowns = int(unknown.sum())
         mask = torch.as_tensor(unknown, dtype=dt, device=self.device)
-        b = scene.observed.to(dt)
         d = scene.dirs.to(dt)
-        P = (lambda e: perpendicular(e, d)) if scene.perpendicular_only else (lambda e: e)  # symmetric: (P A)^T = A^T P
+        if self.data_term["name"] == "images":  # unified BOS: rows of the images' linearised equations
+            M, c = unified_system(scene, self.data_term.get("highpass_px"), self.linearize_at)
+            M, b = M.to(dt), c.to(dt)
+            P = (lambda e: (M @ e[..., None])[..., 0])
+            Pt = (lambda y: (M.transpose(1, 2) @ y[..., None])[..., 0])
+        else:
+            b = scene.observed.to(dt)
+            P = (lambda e: perpendicular(e, d)) if scene.perpendicular_only else (lambda e: e)
+            Pt = P  # symmetric: (P A)^T = A^T P
 
         def Ax(x):
             return P(self.projector.Ax(x))
 
         def Atb(y):
-            return self.projector.Atb(P(y))
+            return self.projector.Atb(Pt(y))
 
         self.cgls = CGLS(Ax, Atb, b, scene.box.shape, regularizer=self.regularizer, lam=self.lam,
                          mask=mask, reweight_every=self.reweight_every, tv_eps=self.tv_eps)
@@ -138,11 +155,14 @@ class CGLSSolver(IterativeSolver):
         return perpendicular(eps, d) if self.scene.perpendicular_only else eps
 
     def evaluate(self) -> dict:
-        r = self.cgls.r * self.scene.scale  # data residual [rad]
         ev = self.evaluation
-        m = {"iteration": self.iteration, "wall_time_s": self.train_seconds, **ev.field_errors(self.reconstruction()),
-             "deflection_rmse": float((r.double() ** 2).sum(-1).mean().sqrt()),
-             "relative_residual": self.cgls.residual(), **ev.heldout_errors(self.predict)}
+        m = {"iteration": self.iteration, "wall_time_s": self.train_seconds, **ev.field_errors(self.reconstruction())}
+        if self.data_term["name"] == "images":  # the residual is photometric: deflections on the evaluation rays
+            m["deflection_rmse"] = ev.deflection_errors({"cgls": self.predict(*ev.train_rays())})["deflection_rmse_cgls"]
+        else:
+            r = self.cgls.r * self.scene.scale  # data residual [rad]
+            m["deflection_rmse"] = float((r.double() ** 2).sum(-1).mean().sqrt())
+        m.update(relative_residual=self.cgls.residual(), **ev.heldout_errors(self.predict))
         self.history.append(m)
         return m
 

@@ -1,0 +1,59 @@
+"""Unified BOS tomography (Grauer and Steinberg, Exp. Fluids 2020): the linearised brightness-constancy equation
+``grad I_ref(x) . u(x) = I_dist(x) - I_ref(x)``, with ``u = A eps`` and ``eps`` the projector's deflections, as
+the voxel solver's linear system, instead of displacements from an optical flow.
+
+Every image pixel of a ray's block (the ``b x b`` image pixels the ray stands for) gives one equation in the
+ray's displacement ``u_r``. Their least-squares sum is ``u_r^T G_r u_r - 2 h_r^T u_r + const`` with the block's
+structure tensor ``G_r = sum g g^T`` and ``h_r = sum g (I_dist - I_ref)``, that is ``|L_r^T u_r - L_r^-1 h_r|^2``
+(``G_r = L_r L_r^T``): two rows per ray instead of ``b^2``, the same solution. Linearised about ``u0`` (zero, as
+the paper, or the flow's displacements: then ``I_ref`` and ``g`` are taken at ``x + u0`` and ``h`` gains
+``G u0``), which extends it to displacements beyond the texture's linear range.
+"""
+from __future__ import annotations
+
+import torch
+
+from nerif.losses.images import block_pixels, highpass
+from nerif.sensing.displacement import displacement_matrix
+from nerif.sensing.imaging import sample
+
+
+def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: float = 0.01):
+    """The unified system of every ray of ``scene``: ``M`` (N, 2, 3) with ``M eps = L^T A eps`` (``eps`` in sigma
+    units) and its right-hand side ``c`` (N, 2), in float64 on the scene's device.
+
+    Args:
+        scene: a scene with images (:class:`nerif.data.scene.ViewImages`).
+        highpass_px: compare the images less their Gaussian blur of this width [px] (None: as they are).
+        linearize_at: ``zero``, or ``flow``: about the displacements of the scene's observations.
+        step_px: the image gradient is the interpolant's, by central differences of this step.
+    """
+    if scene.images is None:
+        raise ValueError("solver=cgls data_term=images (unified BOS) needs the background images, which these data "
+                         "do not have: use data=capture or data.sensing=realistic")
+    if linearize_at not in ("zero", "flow"):
+        raise ValueError(f"linearize_at must be zero or flow, got '{linearize_at}'")
+    Ms, cs = [], []
+    for v, (cam, im) in enumerate(zip(scene.cameras, scene.images)):
+        b = cam.binning // im.camera.binning
+        if b * im.camera.binning != cam.binning:
+            raise ValueError(f"{cam.name}: rays binned {cam.binning} are not a whole number of image pixels "
+                             f"(images binned {im.camera.binning})")
+        sl = scene.view_slice(v)
+        A = displacement_matrix(scene.dirs[sl].double(), im.camera) * scene.scale  # (n, 2, 3) px per sigma unit
+        ref, dist = (highpass(i.double(), highpass_px) for i in (im.reference, im.distorted))
+        x = block_pixels(scene.pixel[sl], cam.width, b).double()  # (n, P, 2)
+        u0 = (A @ scene.observed[sl].double()[..., None])[..., 0] if linearize_at == "flow" else A.new_zeros(len(A), 2)
+        p = (x + u0[:, None, :]).reshape(-1, 2)
+        grads = [(sample(ref, p + step_px * p.new_tensor(e)) - sample(ref, p - step_px * p.new_tensor(e))) / (2 * step_px)
+                 for e in ((1.0, 0.0), (0.0, 1.0))]
+        g = torch.stack(grads, -1).reshape(len(A), -1, 2)  # (n, P, 2)
+        xi = x.reshape(-1, 2).long()
+        diff = (dist[xi[:, 1], xi[:, 0]] - sample(ref, p)).reshape(len(A), -1)  # I_dist(x) - I_ref(x + u0)
+        G = g.transpose(1, 2) @ g  # (n, 2, 2)
+        h = (g * diff[..., None]).sum(1) + (G @ u0[..., None])[..., 0]
+        G = G + 1e-9 * G.diagonal(dim1=1, dim2=2).sum(-1).mean() * torch.eye(2, dtype=G.dtype, device=G.device)
+        L = torch.linalg.cholesky(G)
+        Ms.append(L.transpose(1, 2) @ A)
+        cs.append(torch.linalg.solve_triangular(L, h[..., None], upper=False)[..., 0])
+    return torch.cat(Ms), torch.cat(cs)
