@@ -77,6 +77,20 @@ def write_report(out: Path, stem: str, payload: dict, text: str) -> None:
     print(text, flush=True)
 
 
+def run_arguments(ap: argparse.ArgumentParser, out: str) -> None:
+    """The options every benchmark of runs takes: ``--set`` (overrides of every run), ``--out`` (its folder, default
+    ``out``) and ``--resume`` (finished runs read back)."""
+    ap.add_argument("--set", nargs="*", default=[], help="overrides applied to every run")
+    ap.add_argument("--out", default=out, help="output folder")
+    ap.add_argument("--resume", action="store_true", help="read back the runs an interrupted benchmark finished")
+
+
+def run_named(runs: dict, args: argparse.Namespace) -> dict:
+    """Each named run (name -> overrides) through :func:`run_cells` with the options of :func:`run_arguments`:
+    name -> its row."""
+    return dict(zip(runs, run_cells(list(runs.values()), args.set, Path(args.out), resume=args.resume)))
+
+
 def header(settings: list[str], rows: list[dict]) -> str:
     return (f"`{' '.join(settings) or 'default scene'}`; device {rows[0]['device']}, torch {torch.__version__}, "
             f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} CPU threads")

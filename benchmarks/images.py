@@ -26,7 +26,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ablation import header, run_cells, write_report  # noqa: E402
+from ablation import header, run_arguments, run_named, write_report  # noqa: E402
 from measured_data import t_max_of  # noqa: E402
 
 CAPTURE = Path(__file__).resolve().parents[2] / "shared" / "data" / "independent_capture_bunsen"
@@ -124,16 +124,11 @@ def main(argv=None) -> dict:
     ap.add_argument("--scenes", nargs="+", default=["realistic", "axisymmetric", "plume", "glow", "capture"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     ap.add_argument("--only", choices=("all", "nerif", "cgls"), default="all")
-    ap.add_argument("--set", nargs="*", default=[], help="overrides applied to every run")
-    ap.add_argument("--out", default="benchmarks/results/images", help="output folder")
-    ap.add_argument("--resume", action="store_true", help="read back the runs an interrupted benchmark finished")
+    run_arguments(ap, "benchmarks/results/images")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    runs = cells(args.scenes, args.seeds, args.only)
-    table = run_cells(list(runs.values()), args.set, out, resume=args.resume)
-    rows = dict(zip(runs, table))
-    text = f"Images against flow, {header(args.set, table)}\n\n{report(rows)}"
-    write_report(out, "images", {"settings": args.set, "rows": [{"scene": s, "method": m, **r}
+    rows = run_named(cells(args.scenes, args.seeds, args.only), args)
+    text = f"Images against flow, {header(args.set, list(rows.values()))}\n\n{report(rows)}"
+    write_report(Path(args.out), "images", {"settings": args.set, "rows": [{"scene": s, "method": m, **r}
                                                                 for (s, m), r in rows.items()]}, text)
     return rows
 

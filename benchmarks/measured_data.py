@@ -30,7 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ablation import header, progress_table, run_cells, write_report  # noqa: E402
+from ablation import header, progress_table, run_arguments, run_named, write_report  # noqa: E402
 
 import torch  # noqa: E402
 
@@ -125,16 +125,13 @@ def report(rows: dict[str, dict]) -> str:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--only", choices=("all", "nerif", "cgls"), default="all")
-    ap.add_argument("--set", nargs="*", default=[], help="overrides applied to every run")
     ap.add_argument("--seeds", nargs="*", type=int, default=[1, 2],
                     help="further draws of the realistic pair (seed and data.sensor.seed), beside seed 0")
-    ap.add_argument("--out", default="benchmarks/results/measured_data", help="output folder")
-    ap.add_argument("--resume", action="store_true", help="read back the runs an interrupted benchmark finished")
+    run_arguments(ap, "benchmarks/results/measured_data")
     args = ap.parse_args(argv)
     out = Path(args.out)
-    runs = cells(args.only, args.set, args.seeds)
-    table = run_cells(list(runs.values()), args.set, out, resume=args.resume)
-    rows = dict(zip(runs, table))
+    rows = run_named(cells(args.only, args.set, args.seeds), args)
+    table = list(rows.values())
     for name, row in rows.items():
         row["config"] = name
     text = f"Measured data, {header(args.set, table)}\n\n{report(rows)}"

@@ -86,13 +86,21 @@ def photometric_scale(reference: torch.Tensor, gain: torch.Tensor, step_px: floa
     return sum(per_px2) / 2 * float(gain.double().pow(2).sum((-2, -1)).mean()) / 2
 
 
-def highpass(image: torch.Tensor, sigma_px: Optional[float]) -> torch.Tensor:
-    """``image`` less its Gaussian blur of ``sigma_px`` [px] (None or 0: the image itself): removes a smooth
-    brightness change (illumination drift, the flame's own light) while keeping the background's texture."""
-    if not sigma_px:
-        return image
-    import kornia
+def bandpass(image: torch.Tensor, highpass_px: Optional[float], lowpass_px: Optional[float] = None) -> torch.Tensor:
+    """``image`` blurred by a Gaussian of ``lowpass_px`` [px] (sensor noise: the background's texture is coarser
+    than a pixel), less its blur of ``highpass_px`` (a smooth brightness change between the exposures, the flame's
+    own light); None or 0 skips either."""
+    def blur(img, sigma):
+        import kornia
 
-    k = 2 * int(3 * sigma_px + 0.5) + 1
-    blur = kornia.filters.gaussian_blur2d(image[None, None], (k, k), (sigma_px, sigma_px), border_type="reflect")
-    return image - blur[0, 0]
+        k = 2 * int(3 * sigma + 0.5) + 1
+        return kornia.filters.gaussian_blur2d(img[None, None], (k, k), (sigma, sigma), border_type="reflect")[0, 0]
+
+    image = blur(image, lowpass_px) if lowpass_px else image
+    return image - blur(image, highpass_px) if highpass_px else image
+
+
+def highpass(image: torch.Tensor, sigma_px: Optional[float]) -> torch.Tensor:
+    """``image`` less its Gaussian blur of ``sigma_px`` [px] (None or 0: the image itself): :func:`bandpass`
+    without the low pass."""
+    return bandpass(image, sigma_px)

@@ -16,7 +16,7 @@ import torch
 
 from nerif.data import Scene
 from nerif.losses import deflection_terms
-from nerif.losses.images import cell_origin, cell_weights, highpass, photometric_residual, photometric_scale
+from nerif.losses.images import bandpass, cell_origin, cell_weights, photometric_residual, photometric_scale
 from nerif.registry import Registry
 from nerif.sensing.displacement import displacement_matrix
 from nerif.solvers.batches import RayBatcher
@@ -73,10 +73,11 @@ class ImageTerm:
             change between the exposures, the flame's own light); null: as they are.
         interpolation: of the reference image: ``bicubic`` or ``bilinear``.
         patch: rays per side of a patch (at least 2); a step draws ``rays_per_batch / patch^2`` patches.
+        lowpass_px: blur both images by a Gaussian of this width [px] first (sensor noise); null: none.
     """
 
     def __init__(self, flow_warmup: float = 0.25, highpass_px: Optional[float] = 8.0, interpolation: str = "bicubic",
-                 patch: int = 4):
+                 patch: int = 2, lowpass_px: Optional[float] = None):
         if not 0.0 <= flow_warmup < 1.0:
             raise ValueError(f"data_term.flow_warmup={flow_warmup}: a share of the iterations within [0, 1)")
         if highpass_px is not None and not highpass_px >= 0:
@@ -86,6 +87,7 @@ class ImageTerm:
         if not (isinstance(patch, int) and patch >= 2):
             raise ValueError(f"data_term.patch={patch}: rays per side of a patch, at least 2")
         self.flow_warmup, self.highpass_px, self.mode, self.k = float(flow_warmup), highpass_px, interpolation, patch
+        self.lowpass_px = lowpass_px
         self.flow = DeflectionTerm()
 
     def setup(self, scene: Scene, batches: RayBatcher, iterations: int, masks=None) -> "ImageTerm":
@@ -119,12 +121,12 @@ class ImageTerm:
                 inside = (col + dc < cam.width) & (row + dr < cam.height)
                 patch[sl][inside, j] = lut[(pixel + dr * cam.width + dc)[inside]]
             A = displacement_matrix(scene.dirs[sl].double(), im.camera) * scene.scale  # px per unit of sigma
-            ref = highpass(im.reference, self.highpass_px)
+            ref = bandpass(im.reference, self.highpass_px, self.lowpass_px)
             gain.append(A.float())
             scale.append(torch.full((len(A),), photometric_scale(ref, A), device=device))
             # the views one above the other, MARGIN rows of border between them: one sampling call per step
             refs.append(torch.nn.functional.pad(ref[None, None], (0, 0, MARGIN, MARGIN), mode="replicate")[0, 0])
-            dists.append(torch.nn.functional.pad(highpass(im.distorted, self.highpass_px)[None, None],
+            dists.append(torch.nn.functional.pad(bandpass(im.distorted, self.highpass_px, self.lowpass_px)[None, None],
                                                  (0, 0, MARGIN, MARGIN), mode="replicate")[0, 0])
         self.b, self.rows = b, H + 2 * MARGIN
         self.gain, self.scale = torch.cat(gain), torch.cat(scale)  # (N, 2, 3), (N,): per ray
