@@ -14,8 +14,8 @@ import numpy as np
 import torch
 
 from nerif.data import Scene
-from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
 from nerif.losses.images import block_pixels, photometric_residual
+from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
 from nerif.sensing.displacement import deflection_to_displacement, view_displacements
 
 Predict = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (R, 3) origins [mm], dirs -> (R, 3) sigma units

@@ -39,21 +39,20 @@ def cell_weights(b: int, dtype=torch.float32, device=None) -> tuple[torch.Tensor
     return weights, torch.stack([kx.reshape(-1), ky.reshape(-1)], -1)
 
 
-def cell_origin(pixel: torch.Tensor, width: int, b: int) -> torch.Tensor:
-    """(C,) flat coarse-pixel index of each cell's top-left ray (``row * width + column`` on a grid ``width``
-    wide) -> (C, 2) the image pixel (column, row) of its first image pixel (:func:`cell_weights`)."""
-    first = math.ceil((b - 1) / 2)  # ceil(b j + (b - 1) / 2) = b j + ceil((b - 1) / 2)
-    rc = torch.stack([pixel % width, torch.div(pixel, width, rounding_mode="floor")], -1)
-    return rc * b + first
-
-
 def block_pixels(pixel: torch.Tensor, width: int, b: int) -> torch.Tensor:
-    """(N,) flat coarse-pixel indices on a grid ``width`` wide -> (N, b * b, 2) the image pixels (column, row)
-    of each one's ``b x b`` block."""
+    """(N,) flat coarse-pixel indices on a grid ``width`` wide (``row * width + column``) -> (N, b * b, 2) the
+    image pixels (column, row) of each one's ``b x b`` block, row-major from its top-left pixel."""
     k = torch.arange(b, device=pixel.device)
     ky, kx = torch.meshgrid(k, k, indexing="ij")
     rc = torch.stack([pixel % width, torch.div(pixel, width, rounding_mode="floor")], -1)
     return rc[:, None, :] * b + torch.stack([kx.reshape(-1), ky.reshape(-1)], -1)[None]
+
+
+def cell_origin(pixel: torch.Tensor, width: int, b: int) -> torch.Tensor:
+    """(C,) flat coarse-pixel index of each cell's top-left ray -> (C, 2) the image pixel (column, row) of the
+    cell's first image pixel (:func:`cell_weights`): ``ceil(b j + (b - 1) / 2) = b j + ceil((b - 1) / 2)``, the
+    top-left pixel of the ray's block (:func:`block_pixels`) moved to the ray's centre."""
+    return block_pixels(pixel, width, 1)[:, 0] * b + math.ceil((b - 1) / 2)
 
 
 def photometric_residual(reference: torch.Tensor, distorted: torch.Tensor, x: torch.Tensor, u: torch.Tensor,

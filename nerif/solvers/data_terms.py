@@ -8,7 +8,6 @@ same whichever term is fitted.
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from typing import Optional
 
@@ -21,7 +20,6 @@ from nerif.registry import Registry
 from nerif.sensing.displacement import displacement_matrix
 from nerif.solvers.batches import RayBatcher
 
-log = logging.getLogger(__name__)
 DATA_TERMS = Registry("data term", package="nerif.solvers")
 MARGIN = 4  # rows of border between views in the image term's stacked images (bicubic reads 2 px around)
 
@@ -36,6 +34,7 @@ class RayBatch:
 
 
 def scene_rays(scene: Scene, index: torch.Tensor) -> RayBatch:
+    """The scene's rays ``index`` (R,), with their views' camera centres as origins."""
     views = torch.searchsorted(scene.view_start, index, right=True) - 1
     return RayBatch(scene.origins[views], scene.dirs[index], index)
 

@@ -119,7 +119,8 @@ class CGLSSolver(IterativeSolver):
         mask = torch.as_tensor(unknown, dtype=dt, device=self.device)
         d = scene.dirs.to(dt)
         if self.data_term["name"] == "images":  # unified BOS: rows of the images' linearised equations
-            M, c = unified_system(scene, self.data_term.get("highpass_px"), self.linearize_at)
+            M, c = unified_system(scene, self.data_term.get("highpass_px"), self.linearize_at,
+                                  lowpass_px=self.data_term.get("lowpass_px"))
             M, b = M.to(dt), c.to(dt)
             P = (lambda e: (M @ e[..., None])[..., 0])
             Pt = (lambda y: (M.transpose(1, 2) @ y[..., None])[..., 0])

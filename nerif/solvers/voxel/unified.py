@@ -13,18 +13,19 @@ from __future__ import annotations
 
 import torch
 
-from nerif.losses.images import block_pixels, highpass
+from nerif.losses.images import bandpass, block_pixels
 from nerif.sensing.displacement import displacement_matrix
 from nerif.sensing.imaging import sample
 
 
-def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: float = 0.01):
+def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: float = 0.01, lowpass_px=None):
     """The unified system of every ray of ``scene``: ``M`` (N, 2, 3) with ``M eps = L^T A eps`` (``eps`` in sigma
     units) and its right-hand side ``c`` (N, 2), in float64 on the scene's device.
 
     Args:
         scene: a scene with images (:class:`nerif.data.scene.ViewImages`).
-        highpass_px: compare the images less their Gaussian blur of this width [px] (None: as they are).
+        highpass_px, lowpass_px: the images are band-passed as the neural image term's
+            (:func:`nerif.losses.images.bandpass`; None: as they are).
         linearize_at: ``zero``, or ``flow``: about the displacements of the scene's observations.
         step_px: the image gradient is the interpolant's, by central differences of this step.
     """
@@ -41,7 +42,7 @@ def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: floa
                              f"(images binned {im.camera.binning})")
         sl = scene.view_slice(v)
         A = displacement_matrix(scene.dirs[sl].double(), im.camera) * scene.scale  # (n, 2, 3) px per sigma unit
-        ref, dist = (highpass(i.double(), highpass_px) for i in (im.reference, im.distorted))
+        ref, dist = (bandpass(i.double(), highpass_px, lowpass_px) for i in (im.reference, im.distorted))
         x = block_pixels(scene.pixel[sl], cam.width, b).double()  # (n, P, 2)
         u0 = (A @ scene.observed[sl].double()[..., None])[..., 0] if linearize_at == "flow" else A.new_zeros(len(A), 2)
         p = (x + u0[:, None, :]).reshape(-1, 2)
