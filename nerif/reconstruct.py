@@ -13,7 +13,7 @@ from omegaconf import DictConfig
 
 from nerif.configs import group
 from nerif.data import DATASETS
-from nerif.data.scene import view_directions
+from nerif.data.scene import hot_evidence, view_directions
 from nerif.io.export import write_json
 from nerif.io.outputs import summary_line, volume_slices, write_masks, write_outputs, write_sensing
 from nerif.masks import MASKS
@@ -50,9 +50,10 @@ def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Opt
     solver = SOLVERS.build(group(cfg, "solver"))
     extra = {} if frame is None else {"frame": frame}
     scene = DATASETS.build(group(cfg, "data"), device=str(device), **extra)
+    sign_warnings = check_sign(scene, cfg.field.prior)
     masks = MASKS.build(group(cfg, "mask"), scene=scene)
     solver.setup(scene, masks)
-    rig_warnings = ill_posed(scene)
+    rig_warnings = sign_warnings + ill_posed(scene)
     tc = cfg.train
     write_masks(masks, scene, out_dir)
     write_sensing(scene, out_dir)
@@ -106,6 +107,22 @@ def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Opt
     write_json(metrics, out_dir / "metrics.json")
     print(summary_line(metrics, out_dir), flush=True)
     return metrics
+
+
+def check_sign(scene, prior) -> list[str]:
+    """One sentence where the deflections show gas colder than ambient (:func:`nerif.data.scene.hot_evidence`
+    above 0.2): a flame is hotter, so the reference and distorted images look swapped. Refused unless ``field.prior``
+    was set (a field that may be colder than ambient: then a warning, returned for ``metrics.json``)."""
+    evidence = hot_evidence(scene)
+    if evidence <= 0.2:
+        return []
+    msg = (f"the deflections point the way gas colder than ambient bends light (hot evidence {evidence:+.2f}; a "
+           "flame gives -0.3 to -1): the reference and distorted images look swapped")
+    if prior is None:
+        raise ValueError(f"{msg}; swap them, or for gas that is colder than ambient set field.prior=[a, b] with b "
+                         "above its coldest sigma")
+    log.warning("%s", msg)
+    return [msg]
 
 
 def ill_posed(scene) -> list[str]:

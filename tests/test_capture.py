@@ -116,6 +116,24 @@ def test_bad_capture_folders(written, tmp_path, monkeypatch, edit_rig, edit_file
         capture(_variant(written, tmp_path, edit_rig, edit_files), FLOW, binning=8)
 
 
+def test_swapped_reference_and_distorted_images_are_refused_before_training(written, tmp_path):
+    """Issue 28: swapped images gave a field pinned at the cold bound, 419 K off, without a word."""
+    from nerif.data.scene import hot_evidence
+
+    def swap(rig):
+        v = rig["views"]
+        refs = v["references"] if isinstance(v["references"], list) else [v["references"]] * len(v["images"])
+        v["images"], v["references"] = refs, v["images"]
+
+    assert hot_evidence(capture(written[0], FLOW, binning=8)) < -0.3
+    root = _variant(written, tmp_path, swap)
+    assert hot_evidence(capture(root, FLOW, binning=8)) > 0.3
+    cfg = tiny_config("data=capture", f"data.root={root}", "data.binning=8", synthetic=False)
+    with pytest.raises(ValueError, match="the reference and distorted images look swapped; swap them"):
+        run(cfg, tmp_path / "run")
+    assert not (tmp_path / "run" / "checkpoint.pt").exists()
+
+
 def test_one_shared_reference(written, tmp_path):
     def share(rig):
         rig["views"]["references"] = "reference_00.png"

@@ -74,8 +74,34 @@ def test_a_diverging_run_stops_and_keeps_the_last_good_checkpoint(tmp_path):
 def test_a_checkpoint_of_another_field_is_refused(tmp_path):
     tr = neural_solver("encoder=frequency")
     tr.save(tmp_path / "ck.pt")
-    with pytest.raises(ValueError, match="another field configuration"):
+    with pytest.raises(ValueError, match="its solver differ"):
         neural_solver("encoder=hash").load(tmp_path / "ck.pt")
+
+
+def test_a_checkpoint_of_other_data_is_refused_naming_what_differs(tmp_path):
+    """Issue 28: a resume onto another scene ran on and reported the old scene's figures."""
+    tr = neural_solver()
+    tr.step()
+    tr.save(tmp_path / "checkpoint.pt")
+    with pytest.raises(ValueError, match=r"another run: its observations \(RMS per view\) differ"):
+        neural_solver("phantom.width_mm=9.0").load(tmp_path / "checkpoint.pt")
+    with pytest.raises(ValueError, match="another run: its ambient"):
+        neural_solver("phantom.T0=290").load(tmp_path / "checkpoint.pt")
+    same = neural_solver()
+    same.load(tmp_path)  # a run folder stands for its checkpoint.pt
+    assert same.iteration == 1
+
+
+def test_a_truncated_or_foreign_checkpoint_is_one_sentence(tmp_path):
+    tr = neural_solver()
+    tr.save(tmp_path / "ck.pt")
+    data = (tmp_path / "ck.pt").read_bytes()
+    (tmp_path / "cut.pt").write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match="cut.pt is not a readable checkpoint"):
+        neural_solver().load(tmp_path / "cut.pt")
+    torch.save({"weights": torch.zeros(3)}, tmp_path / "other.pt")
+    with pytest.raises(ValueError, match="other.pt is not a nerif checkpoint"):
+        neural_solver().load(tmp_path / "other.pt")
 
 
 def test_no_second_order_graph_when_only_the_discrete_term_trains(monkeypatch):
@@ -180,12 +206,15 @@ def test_a_flame_at_the_prior_bound_is_reported_with_the_setting_to_raise():
     tr = neural_solver()
     sigma = np.zeros((10, 10, 10))
     sigma[:5] = -0.5
-    assert tr.saturation(sigma) == {"flame_at_prior_bound": 0.0}
+    assert tr.saturation(sigma) == {"flame_at_prior_bound": 0.0, "box_at_cold_bound": 0.0}
     sigma[:2] = -1.05  # 40 % of the flame pinned at the bound (data.T_max=2000 holds at most 2808 K)
     out = tr.saturation(sigma)
     assert out["flame_at_prior_bound"] == pytest.approx(0.4)
     assert len(out["warnings"]) == 1 and out["warnings"][0].startswith("40.0 % of the flame sits at the hottest 2808 K the field can hold "
                                      "(data.T_max=2000 K)") and "raise data.T_max" in out["warnings"][0]
+    sigma[5:8] = 0.05  # a field pressed against the cold bound (sigma <= 0.05) over 30 % of the box
+    out = tr.saturation(sigma)
+    assert out["box_at_cold_bound"] == pytest.approx(0.3) and "look swapped" in out["warnings"][0]
 
 
 def test_a_run_stops_when_its_evaluations_no_longer_improve_the_fit(tmp_path):

@@ -33,6 +33,15 @@ SOLVERS = Registry("solver", package="nerif.solvers")
 _COUNTERS = ("iteration", "history", "train_seconds", "step_times")
 
 
+def _same(a, b) -> bool:
+    """Fingerprint entries equal, numbers to a relative 1e-3."""
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, float) or isinstance(b, float):
+        return isinstance(a, (int, float)) and isinstance(b, (int, float)) and abs(a - b) <= 1e-3 * max(abs(a), abs(b))
+    return a == b
+
+
 class DivergenceError(RuntimeError):
     """The loss became NaN or infinite."""
 
@@ -159,8 +168,21 @@ class IterativeSolver:
         raise NotImplementedError
 
     # --- checkpoints ---
+    def fingerprint(self) -> dict:
+        """What a checkpoint must agree on to be resumed: the solver (:attr:`labels`) and the data it was trained
+        on (probe box, ambient gas, views, rays and the RMS of each view's observations, 4 significant digits:
+        the same data rendered again, on another device, agree)."""
+        s = self.scene
+        if s is None:  # not given data (a solver driven without a scene)
+            return {"solver": dict(self.labels)}
+        obs = s.observed.double()
+        rms = [float(f"{obs[s.view_slice(v)].pow(2).mean().sqrt().item():.4g}") for v in range(s.n_views)]
+        return {"solver": dict(self.labels), "probe box": [*map(int, s.box.shape), float(s.box.voxel_mm)],
+                "ambient": [float(s.ambient.T0), float(s.ambient.n0)], "views": [c.name for c in s.cameras],
+                "rays": int(len(s.dirs)), "observations (RMS per view)": rms}
+
     def state_dict(self) -> dict:
-        return {k: getattr(self, k) for k in _COUNTERS}
+        return {**{k: getattr(self, k) for k in _COUNTERS}, "fingerprint": self.fingerprint()}
 
     def load_state_dict(self, st: dict) -> None:
         for k in _COUNTERS:
@@ -170,10 +192,33 @@ class IterativeSolver:
         atomic_save_torch(self.state_dict(), path)
 
     def load(self, path: Path) -> None:
+        """Continue from the checkpoint ``path`` (a ``checkpoint.pt``, or a run folder holding one), refused in one
+        sentence when it is not a checkpoint of this solver on these data (:meth:`fingerprint`)."""
         path = Path(path)
+        if path.is_dir():
+            path = path / "checkpoint.pt"
         if not path.is_file():
             raise FileNotFoundError(f"checkpoint {path} does not exist")
-        self.load_state_dict(torch.load(path, map_location=self.device, weights_only=False))
+        try:
+            st = torch.load(path, map_location=self.device, weights_only=False)
+        except Exception as e:  # truncated, or not written by torch.save
+            raise ValueError(f"{path} is not a readable checkpoint ({type(e).__name__}: "
+                             f"{str(e).splitlines()[0] if str(e) else 'no details'})") from None
+        if not isinstance(st, dict) or not all(k in st for k in _COUNTERS):
+            raise ValueError(f"{path} is not a nerif checkpoint")
+        saved = st.get("fingerprint")
+        if saved is None:
+            log.warning("%s records nothing about the data it was trained on (made before fingerprints): resuming "
+                        "it on trust", path)
+        else:
+            own = self.fingerprint()
+            differ = [k for k in own if not _same(saved.get(k), own[k])]
+            if differ:
+                k = differ[0]
+                raise ValueError(f"{path} was made by another run: its {', '.join(differ)} differ from this one's "
+                                 f"({k}: {saved.get(k)} there, {own[k]} here); resume only the same solver on the "
+                                 "same data, or start afresh without train.resume")
+        self.load_state_dict(st)
 
     def start_from(self, path: Path) -> None:
         """Start from the final state of another run on data of the same rig and probe box (the previous frame
