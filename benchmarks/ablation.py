@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import shutil
 import time
 from pathlib import Path
 
@@ -41,11 +42,15 @@ def run_cells(cells: list[str], settings: list[str], out: Path, resume: bool = F
     """Each cell (a string of overrides, plus ``settings``) through :func:`nerif.app.run`, one after the other in
     this process; returns one row per cell: its metrics, total time and evaluation history. ``resume``: a cell
     whose folder already holds a ``metrics.json`` (a finished run of an interrupted benchmark) is read back, not
-    run again."""
+    run again, an unfinished one continues from its checkpoint; without ``resume`` every cell starts afresh (its
+    folder's earlier contents removed)."""
     rows = []
     for i, cell in enumerate(cells):
-        cfg = compose(list(settings) + cell.split() + ["train.progress=false"])
         folder = out / f"{i}_{cell.replace(' ', '_').replace('=', '-')}"
+        if folder.exists() and not resume:
+            shutil.rmtree(folder)
+        again = ["train.resume=auto"] if resume and folder.exists() else []
+        cfg = compose(list(settings) + cell.split() + ["train.progress=false"] + again)
         t0 = time.perf_counter()
         if resume and (folder / "metrics.json").is_file():
             m = json.loads((folder / "metrics.json").read_text())

@@ -15,8 +15,8 @@ from omegaconf import DictConfig
 
 from nerif.configs import check_complete, group
 from nerif.data.frames import frames_of
-from nerif.io.folders import check_writable
-from nerif.reconstruct import reconstruct
+from nerif.io.folders import check_writable, run_folder
+from nerif.reconstruct import reconstruct, resuming
 from nerif.sequence import run_sequence
 
 DEVICES = "auto, cpu, cuda or cuda:N"
@@ -84,7 +84,9 @@ def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     torch.set_num_threads(resolve_threads(cfg.threads, parallel_jobs))
     retain_freed_memory()
     check_writable(out_dir)
-    frames = frames_of(group(cfg, "data"))  # a time series is checked whole here, before any work
-    if frames is not None:
-        return run_sequence(cfg, out_dir, device, frames)
-    return reconstruct(cfg, out_dir, device, t_start=t_start)
+    continuing = cfg.train.resume is not None or resuming(cfg.train.resume)
+    with run_folder(out_dir, continuing):
+        frames = frames_of(group(cfg, "data"))  # a time series is checked whole here, before any work
+        if frames is not None:
+            return run_sequence(cfg, out_dir, device, frames)
+        return reconstruct(cfg, out_dir, device, t_start=t_start)

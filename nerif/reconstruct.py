@@ -13,7 +13,7 @@ from omegaconf import DictConfig
 
 from nerif.configs import group
 from nerif.data import DATASETS
-from nerif.data.scene import hot_evidence, view_directions
+from nerif.data.scene import hot_evidence, view_directions, view_span_deg
 from nerif.io.export import write_json
 from nerif.io.outputs import summary_line, volume_slices, write_masks, write_outputs, write_sensing
 from nerif.masks import MASKS
@@ -128,9 +128,14 @@ def check_sign(scene, prior) -> list[str]:
 def ill_posed(scene) -> list[str]:
     """Warnings (logged, and returned for ``metrics.json``) where the data cannot fix a 3-D field."""
     n = view_directions(scene.cameras)
-    if n >= 3:
+    if n < 3:
+        msg = (f"ill-posed: the {scene.n_views} training view(s) look along only {n} distinct direction(s); a 3-D "
+               "field needs at least 3, and the reconstruction is not to be trusted away from what they see")
+    elif (span := view_span_deg(scene.cameras)) < 30.0:
+        msg = (f"ill-posed: the {scene.n_views} training views span only {span:.1f} degrees of viewing directions; "
+               "tomography needs a wide spread (30 degrees at least), and the reconstruction is not to be trusted"
+               + (" (were the angles given in radians? angles_deg takes degrees)" if span < 6.5 else ""))
+    else:
         return []
-    msg = (f"ill-posed: the {scene.n_views} training view(s) look along only {n} distinct direction(s); a 3-D "
-           "field needs at least 3, and the reconstruction is not to be trusted away from what they see")
     log.warning("%s", msg)
     return [msg]

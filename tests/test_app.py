@@ -281,3 +281,38 @@ print(faults(), retain_freed_memory(), faults(), faults())
     default, applied, first, later = out.stdout.split()
     assert int(default) > 10 * 6 * 1500  # every step faulted in again
     assert applied == "True" and int(later) < 200
+
+
+def test_views_over_a_few_degrees_are_said_to_be_ill_posed_and_radians_suspected():
+    """Issue 28: twelve views over 2.9 degrees (angles_deg written in radians) gave no warning and 364 K off."""
+    from nerif.configs import group
+    from nerif.data import DATASETS
+    from nerif.reconstruct import ill_posed
+    from tests.helpers import tiny_config
+
+    def scene(angles):
+        cfg = tiny_config(f"rig.angles_deg={angles}")
+        return DATASETS.build(group(cfg, "data"), device="cpu")
+
+    assert ill_posed(scene([0, 30, 60, 90, 120, 150])) == []
+    msg = ill_posed(scene([0.0, 0.5, 1.0, 1.5, 2.0, 2.6]))
+    assert len(msg) == 1 and "span only 2.6 degrees" in msg[0] and "radians" in msg[0]
+
+
+def test_a_run_folder_is_held_by_one_run_and_an_earlier_run_is_not_overwritten(tmp_path):
+    """Issue 28: two runs in one folder at once both exited 0 (run A's results under run B's config), and a new run
+    into a finished run's folder overwrote its checkpoint and metrics."""
+    from nerif.app import run
+    from nerif.io.folders import run_folder
+    from tests.helpers import tiny_config
+
+    with run_folder(tmp_path, continuing=False):
+        with pytest.raises(ValueError, match=f"another nerif run \\(pid {os.getpid()}\\) is writing to {tmp_path}"):
+            run(tiny_config("train.iterations=2"), tmp_path)
+    run(tiny_config("train.iterations=2"), tmp_path)
+    before = (tmp_path / "metrics.json").read_bytes()
+    with pytest.raises(ValueError, match="holds an earlier run \\(metrics.json, checkpoint.pt, reconstruction.npz\\): "
+                                         "continue it with train.resume=auto"):
+        run(tiny_config("train.iterations=4"), tmp_path)
+    assert (tmp_path / "metrics.json").read_bytes() == before
+    assert run(tiny_config("train.iterations=4", "train.resume=auto"), tmp_path)["iterations"] == 4

@@ -104,6 +104,10 @@ def _read(path):
     (lambda r: r.update(version=3), None, ValueError, "this nerif reads versions 1 and 2"),
     (lambda r: r["camera"].pop("pitch_um"), None, ValueError, "lacks 'pitch_um'"),
     (lambda r: r.update(temperature_range_K=[2000, 300]), None, ValueError, "two increasing positive temperatures"),
+    (lambda r: r["camera"].update(camera_to_background_mm=500), None, ValueError,
+     "camera.camera_to_background_mm = 500 must exceed camera.camera_to_centre_mm"),
+    (lambda r: r["camera"].update(focal_mm=-105), None, ValueError, "camera.focal_mm = -105 must be a positive number"),
+    (lambda r: r["camera"].update(focal_mm="abc"), None, ValueError, "camera.focal_mm = 'abc' must be a positive"),
 ])
 def test_bad_capture_folders(written, tmp_path, monkeypatch, edit_rig, edit_files, error, message):
     import nerif.data.capture as cap_mod

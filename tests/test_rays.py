@@ -13,3 +13,29 @@ def test_a_camera_that_does_not_see_the_box_is_named():
                   name="camera 7 (backwards)")
     with pytest.raises(ValueError, match="camera 7 \\(backwards\\) .* does not see the probe box"):
         rays_in_box(box, [good, away])
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"background_behind_mm": -200.0}, r"rig.background_behind_mm=-200.0 must be a positive number"),
+    ({"focal_mm": -105.0}, r"rig.focal_mm=-105.0 must be a positive number"),
+    ({"distance_mm": -800.0}, r"rig.distance_mm=-800.0 must be a positive number"),
+    ({"pitch_um": 0.0}, r"rig.pitch_um=0.0 must be a positive number"),
+])
+def test_impossible_rig_settings_are_refused_naming_the_key(kwargs, message):
+    """Issue 28: a background before the probe, a negative focal length or distance gave 400-700 K off."""
+    with pytest.raises(ValueError, match=message):
+        arc_rig(n_cameras=3, binning=40, **kwargs)
+
+
+def test_a_camera_inside_the_box_or_a_background_before_its_far_side_is_refused():
+    box = ProbeBox((100, 100, 100), 1.0)
+    with pytest.raises(ValueError, match="camera 0 .* is inside the probe box"):
+        rays_in_box(box, arc_rig(n_cameras=1, distance_mm=30.0, background_behind_mm=800.0, binning=40))
+    with pytest.raises(ValueError, match="its background, 820 mm away, is not behind the probe box .* 850 mm away"):
+        rays_in_box(box, arc_rig(n_cameras=1, distance_mm=800.0, background_behind_mm=20.0, binning=40))
+
+
+def test_a_rotation_that_is_not_one_is_refused():
+    R = look_at_origin(np.array([0.0, 0.0, 800.0])) @ np.diag([-1.0, 1.0, 1.0])  # a reflection
+    with pytest.raises(ValueError, match="camera 3: its rotation is not a rotation"):
+        Camera(np.array([0.0, 0.0, 800.0]), R, 112.4, 0.8, 18, 32, 32.0, 1600, 105, name="camera 3")

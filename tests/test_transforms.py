@@ -108,3 +108,20 @@ def test_bad_dataset_folders(tmp_path):
         transforms(str(tmp_path / "nope"), PROBE, 1100.0, 1.00007253, sigma_prior=None)
     with pytest.raises(ValueError, match="data.root is not set"):
         transforms("???", PROBE, 1100.0, 1.00007253, sigma_prior=None)
+
+
+@pytest.mark.parametrize("edit, message", [
+    ({"image_max": -16.8897858}, r"image_max \(-16.8897858\) must exceed image_min"),  # equal to image_min
+    ({"fl_x": -1000.0}, r"the focal length fl_x = -1000.0 px must be positive"),
+])
+def test_a_constant_deflection_range_or_a_negative_focal_length_is_refused(tmp_path, edit, message):
+    """Issue 28: image_min == image_max trained on constant deflections; a negative fl_x gave 4.2 against 0.73."""
+    import json
+
+    for split in ("train", "val", "test"):
+        meta = json.loads((ROOT / f"transforms_{split}.json").read_text())
+        meta.update(edit)
+        (tmp_path / f"transforms_{split}.json").write_text(json.dumps(meta))
+        (tmp_path / split).symlink_to(ROOT / split)
+    with pytest.raises(ValueError, match=message):
+        transforms(str(tmp_path), PROBE, 1100.0, 1.00007253, sigma_prior=None)

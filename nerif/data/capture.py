@@ -92,6 +92,14 @@ def read_rig(root: Path) -> dict:
     cam, views = _need(rig, "camera", str(path)), _need(rig, "views", str(path))
     for k in ("focal_mm", "pitch_um", "sensor_px", "f_number", "camera_to_centre_mm", "camera_to_background_mm"):
         _need(cam, k, f"{path} camera")
+    for k in ("focal_mm", "pitch_um", "f_number", "camera_to_centre_mm", "camera_to_background_mm"):
+        v = cam[k]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (np.isfinite(v) and v > 0):
+            raise ValueError(f"{path}: camera.{k} = {v!r} must be a positive number")
+    if not cam["camera_to_background_mm"] > cam["camera_to_centre_mm"]:
+        raise ValueError(f"{path}: camera.camera_to_background_mm = {cam['camera_to_background_mm']} must exceed "
+                         f"camera.camera_to_centre_mm = {cam['camera_to_centre_mm']} (the background lies behind the "
+                         "probe)")
     angles = _need(views, "angles_deg", f"{path} views")
     refs = _need(views, "references", f"{path} views")
     rig_frames(rig, path)

@@ -208,6 +208,13 @@ def view_directions(cameras: list[Camera], tol_deg: float = 1.0) -> int:
     return len(distinct)
 
 
+def view_span_deg(cameras: list[Camera]) -> float:
+    """The widest angle between two cameras' viewing axes [deg], opposite axes counting as one (0 to 90)."""
+    axes = np.stack([np.asarray(c.rotation)[:, 2] for c in cameras])
+    cos = np.clip(np.abs(axes @ axes.T), 0.0, 1.0)
+    return float(np.rad2deg(np.arccos(cos.min())))
+
+
 def heldout_views(heldout, n_views: int) -> list[int]:
     """Sorted distinct held-out view indices, checked: within range and leaving a view to train on."""
     held = sorted({int(v) for v in heldout})

@@ -64,6 +64,13 @@ def read_split(root: Path, split: str) -> dict:
         raise ValueError(f"{path} lacks {', '.join(missing)}")
     if not meta["frames"]:
         raise ValueError(f"{path} has no frames")
+    try:
+        lo, hi = float(meta["image_min"]), float(meta["image_max"])
+    except (TypeError, ValueError):
+        lo = hi = float("nan")
+    if not hi > lo:  # equal: every pixel would decode to one constant deflection
+        raise ValueError(f"{path}: image_max ({meta['image_max']}) must exceed image_min ({meta['image_min']}), "
+                         "the deflection range the 16-bit images span")
     return meta
 
 

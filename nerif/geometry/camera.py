@@ -45,6 +45,17 @@ class Camera:
     name: str = "camera"
     binning: int = 1
 
+    def __post_init__(self):
+        for key in ("image_distance_mm", "pitch_mm", "f_number", "background_mm", "focal_mm"):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
+                raise ValueError(f"{self.name}: {key} = {v} must be a positive length (or number): check the rig")
+        if not (self.width >= 1 and self.height >= 1):
+            raise ValueError(f"{self.name}: a sensor of {self.width} x {self.height} px")
+        R = np.asarray(self.rotation, dtype=np.float64)
+        if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+            raise ValueError(f"{self.name}: its rotation is not a rotation (orthonormal, determinant +1)")
+
     @property
     def principal_point(self) -> tuple[float, float]:
         return self.width / 2.0, self.height / 2.0
@@ -100,6 +111,8 @@ def camera_from_nerf_pose(c2w, focal_px: float, width: int, height: int, cx: flo
     c2w = np.asarray(c2w, dtype=np.float64)
     if c2w.shape not in ((4, 4), (3, 4)):
         raise ValueError(f"{name}: a pose must be a 4 x 4 or 3 x 4 matrix, got shape {c2w.shape}")
+    if not (np.isfinite(focal_px) and focal_px > 0):
+        raise ValueError(f"{name}: the focal length fl_x = {focal_px} px must be positive")
     if not np.all(np.isfinite(c2w)):
         raise ValueError(f"{name}: the pose is not finite ({int(np.sum(~np.isfinite(c2w)))} NaN or infinite entries)")
     if abs(cx - width / 2) > 1e-6 or abs(cy - height / 2) > 1e-6:
@@ -154,6 +167,11 @@ def arc_rig(
     if isinstance(binning, bool) or not isinstance(binning, int) or binning < 1:
         raise ValueError(f"rig.binning={binning}: pixel binning must be a whole number of at least 1 (1 = the full "
                          "sensor)")
+    for key, v in (("distance_mm", distance_mm), ("focal_mm", focal_mm), ("pitch_um", pitch_um),
+                   ("background_behind_mm", background_behind_mm), ("f_number", f_number)):
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v > 0):
+            raise ValueError(f"rig.{key}={v} must be a positive number"
+                             + (" (the background lies behind the probe centre)" if key == "background_behind_mm" else ""))
     background_mm = distance_mm + background_behind_mm
     if not focal_mm < background_mm:
         raise ValueError(f"a {focal_mm} mm lens cannot focus on a background {background_mm} mm away")

@@ -19,7 +19,15 @@ def rays_in_box(box: ProbeBox, cameras: list[Camera], device="cpu"):
     Returns: origins (V, 3), dirs (N, 3), pixel (N,), view_start (V + 1,).
     """
     dirs, pixels, starts = [], [], [0]
+    corners = np.stack(np.meshgrid(*[[-h, h] for h in box.half_mm], indexing="ij"), -1).reshape(-1, 3)
     for cam in cameras:
+        if np.all(np.abs(cam.position) < box.half_mm):
+            raise ValueError(f"{cam.name} at {np.round(cam.position, 1)} mm is inside the probe box "
+                             f"{box.extent_mm.tolist()} mm: check the camera distance and the probe box")
+        far = float(((corners - cam.position) @ np.asarray(cam.rotation)[:, 2]).max())
+        if not cam.background_mm > far:
+            raise ValueError(f"{cam.name}: its background, {cam.background_mm:g} mm away, is not behind the probe box "
+                             f"(whose far side is {far:.0f} mm away): check the background distance")
         d = cam.pixel_directions(torch.float64).to(device)
         o = torch.as_tensor(cam.position, dtype=torch.float64, device=device).expand_as(d)
         hit = box.intersect(o, d)[2]

@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import logging
+import os
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +25,41 @@ def check_writable(folder: Path, key: str = "hydra.run.dir") -> None:
     except OSError as e:
         raise ValueError(f"the output folder {folder} cannot be written ({e.strerror or e}); choose another with "
                          f"{key}=...") from None
+
+
+RUN_OUTPUTS = ("metrics.json", "checkpoint.pt", "reconstruction.npz", "sequence.pvd", "frame_0000")
+LOCK_FILE = ".nerif.lock"
+
+
+@contextmanager
+def run_folder(folder: Path, continuing: bool):
+    """Hold ``folder`` for one run: refused in one sentence when another run is writing there (an advisory lock,
+    released by the system if the process dies), or when it holds an earlier run's results and this run does not
+    continue it (``continuing``: ``train.resume`` set, or a requeued job), which would overwrite them."""
+    import fcntl
+
+    folder = Path(folder)
+    if not continuing:
+        found = [name for name in RUN_OUTPUTS if (folder / name).exists()]
+        if found:
+            raise ValueError(f"{folder} holds an earlier run ({', '.join(found)}): continue it with train.resume=auto, "
+                             "or write this run elsewhere with hydra.run.dir=...")
+    handle = open(folder / LOCK_FILE, "a+")
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.seek(0)
+            who = handle.read().strip() or "another process"
+            raise ValueError(f"another nerif run ({who}) is writing to {folder}: wait for it to end, or write this "
+                             "run elsewhere with hydra.run.dir=...") from None
+        handle.seek(0)
+        handle.truncate()
+        handle.write(f"pid {os.getpid()}")
+        handle.flush()
+        yield folder
+    finally:
+        handle.close()
 
 
 class OutputFolderCheck(Callback):
