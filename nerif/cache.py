@@ -12,6 +12,8 @@ import hashlib
 import json
 import logging
 import os
+import time
+import zipfile
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
@@ -101,7 +103,16 @@ def cache_limit_bytes() -> float:
 
 def evict(folder: Path, limit_bytes: float, keep: Path) -> None:
     """Remove the least recently used ``.npz`` entries of ``folder`` until it holds at most ``limit_bytes``
-    (never ``keep``, the entry just written)."""
+    (never ``keep``, the entry just written). A write killed before its rename leaves a ``.*.tmp`` file: those
+    older than an hour (no write takes that long) are removed first."""
+    now = time.time()
+    for p in folder.glob(".*.tmp"):
+        try:
+            if now - p.stat().st_mtime > 3600:
+                p.unlink()
+                log.info("cache: removed %s, left by an interrupted write", p.name)
+        except OSError:  # removed meanwhile by another process
+            pass
     entries = sorted(folder.glob("*.npz"), key=lambda p: p.stat().st_mtime)
     total = sum(p.stat().st_size for p in entries)
     for p in entries:
@@ -122,10 +133,14 @@ def cached_arrays(cache_dir, prefix: str, payload: dict, compute: Callable[[], d
     key = hashlib.sha256(text.encode()).hexdigest()[:16]
     path = Path(cache_dir).expanduser() / f"{prefix}-{key}.npz" if cache_dir else None
     if path is not None and path.is_file():
-        with np.load(path, allow_pickle=False) as f:
-            arrays = {k: f[k] for k in f.files}
-        os.utime(path)  # recently used
-        return arrays
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                arrays = {k: f[k] for k in f.files}
+            os.utime(path)  # recently used
+            return arrays
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:  # damaged: computed again, replaced
+            log.warning("cache: %s is damaged (%s): computing it again", path, type(e).__name__)
+            path.unlink(missing_ok=True)
     arrays = compute()
     if path is not None:
         write_npz(path, **arrays)

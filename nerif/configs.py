@@ -53,8 +53,34 @@ def missing_keys(cfg: DictConfig, prefix: str = "") -> list[str]:
     return out
 
 
+def stray_keys(cfg: DictConfig) -> list[tuple[str, list[str]]]:
+    """Keys of the plain blocks of ``config.yaml`` (``train``, ``loss``, ``field``, ...: not config groups, whose
+    settings their registries check) and of its top level that ``config.yaml`` does not define (a ``+key=value``
+    or a misspelling), each with the block's own keys."""
+    base = OmegaConf.load(config_dir() / "config.yaml")
+    groups = {next(iter(d)) for d in base.defaults if isinstance(d, (dict, DictConfig))}
+    known_top = set(base.keys()) | groups | {"hydra", "defaults", "experiment"}
+    out = [(k, sorted(known_top - {"defaults", "hydra"})) for k in cfg.keys() if k not in known_top]
+    for block in base.keys():
+        if block not in ("defaults", "hydra") and isinstance(base[block], DictConfig) and block in cfg:
+            known = list(base[block].keys())
+            out += [(f"{block}.{k}", known) for k in cfg[block].keys() if k not in known]
+    return out
+
+
 def check_complete(cfg: DictConfig) -> None:
-    """One sentence naming every required value left unset, e.g. ``phantom.path``."""
+    """One sentence naming every required value left unset (e.g. ``phantom.path``) or a key no block takes
+    (e.g. ``+train.iteration=5``)."""
+    stray = stray_keys(cfg)
+    if stray:
+        import difflib
+
+        key, known = stray[0]
+        near = difflib.get_close_matches(key.rsplit(".", 1)[-1], known, n=1)
+        where = key.rsplit(".", 1)[0] + "." if "." in key else ""
+        raise ValueError(f"{', '.join(k for k, _ in stray)}: not a setting nerif knows"
+                         + (f" (did you mean {where}{near[0]}?)" if near else "")
+                         + f"; the settings{' of ' + where[:-1] if where else ''}: {', '.join(known)}")
     missing = missing_keys(cfg)
     if missing:
         raise ValueError(f"{', '.join(missing)} must be set: give {'it' if len(missing) == 1 else 'them'} on the "

@@ -96,15 +96,21 @@ def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Opt
     finally:
         writer.close()
 
-    metrics = write_outputs(solver, scene, out_dir, losses)
-    metrics["warnings"] = rig_warnings + metrics.get("warnings", [])
-    metrics.update(setup_time_s=setup_s, device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device),
-                   cpu_threads=torch.get_num_threads())
-    if device.type == "cuda":
-        metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
-    metrics["total_time_s"] = time.perf_counter() - t_start
-    metrics.update(about or {})
-    write_json(metrics, out_dir / "metrics.json")
+    try:
+        metrics = write_outputs(solver, scene, out_dir, losses)
+        metrics["warnings"] = rig_warnings + metrics.get("warnings", [])
+        metrics.update(setup_time_s=setup_s, cpu_threads=torch.get_num_threads(),
+                       device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
+        if device.type == "cuda":
+            metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
+        metrics["total_time_s"] = time.perf_counter() - t_start
+        metrics.update(about or {})
+        write_json(metrics, out_dir / "metrics.json")
+    except OSError as e:  # a full disk: one sentence saying what is there
+        saved = sorted(p.name for p in out_dir.iterdir() if not p.name.startswith("."))
+        raise ValueError(f"writing the results to {out_dir} failed ({e.strerror or e}); it holds "
+                         f"{', '.join(saved) or 'nothing'}: free some space and write them again with "
+                         "train.resume=auto") from None
     print(summary_line(metrics, out_dir), flush=True)
     return metrics
 

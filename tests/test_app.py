@@ -128,6 +128,8 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("device=mps", "device=mps is not one nerif runs on"),
     ("data.T_max=600", "beyond what the field can represent with data.T_max=600 K (up to 632 K"),
     ("phantom.T_peak=1000000", "beyond what the field can represent with data.T_max=2000 K (up to 2808 K"),
+    ("+train.iteration=5", "train.iteration: not a setting nerif knows (did you mean train.iterations?)"),  # issue 28
+    ("+seeds=3", "seeds: not a setting nerif knows (did you mean seed?)"),
 ])
 def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
     r = nerif(*TINY, *override.split(), f"hydra.run.dir={tmp_path}", cwd=ROOT)
@@ -316,3 +318,25 @@ def test_a_run_folder_is_held_by_one_run_and_an_earlier_run_is_not_overwritten(t
         run(tiny_config("train.iterations=4"), tmp_path)
     assert (tmp_path / "metrics.json").read_bytes() == before
     assert run(tiny_config("train.iterations=4", "train.resume=auto"), tmp_path)["iterations"] == 4
+
+
+def test_a_full_disk_loses_no_result_that_fits_and_is_one_sentence(tmp_path, monkeypatch):
+    """Issue 28: with the disk full at the end, the final checkpoint's torch traceback lost the metrics and the
+    reconstruction, although they would have fit."""
+    import errno
+
+    from nerif.app import run
+    from nerif.solvers.base import IterativeSolver
+    from tests.helpers import tiny_config
+
+    def full(self, path):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(IterativeSolver, "save", full)
+    m = run(tiny_config("train.iterations=4"), tmp_path / "a")
+    assert m["iterations"] == 4 and (tmp_path / "a" / "reconstruction.npz").is_file()
+    assert not (tmp_path / "a" / "checkpoint.pt").exists()
+    monkeypatch.setattr("nerif.reconstruct.write_json", lambda *a, **k: full(None, None))
+    with pytest.raises(ValueError, match="writing the results to .*b failed \\(No space left on device\\); it holds "
+                                         ".*reconstruction.npz"):
+        run(tiny_config("train.iterations=4"), tmp_path / "b")

@@ -21,6 +21,28 @@ def test_computed_once_per_payload_and_read_back(tmp_path):
     np.testing.assert_array_equal(c["eps"], [0.0, 3.0, 6.0, 9.0])
 
 
+def test_a_damaged_entry_is_computed_again_and_an_interrupted_write_is_removed(tmp_path):
+    """Issue 28: a corrupt entry failed with BadZipFile on every rerun; a write killed before its rename left a
+    ``.tmp`` file that the size bound never counted or removed."""
+    import os
+    import time
+
+    calls = []
+    compute = lambda: calls.append(1) or {"eps": np.arange(3.0)}  # noqa: E731
+    cached_arrays(tmp_path, "obs", {"k": 1}, compute)
+    entry = next(tmp_path.glob("obs-*.npz"))
+    entry.write_bytes(entry.read_bytes()[:40])
+    orphan, fresh = tmp_path / ".obs-x.npz.abc.tmp", tmp_path / ".obs-y.npz.def.tmp"
+    for f in (orphan, fresh):
+        f.write_bytes(b"partial")
+    old = time.time() - 7200
+    os.utime(orphan, (old, old))
+    again = cached_arrays(tmp_path, "obs", {"k": 1}, compute)
+    np.testing.assert_array_equal(again["eps"], [0.0, 1.0, 2.0])
+    assert calls == [1, 1] and np.load(entry)["eps"].shape == (3,)  # replaced by a whole entry
+    assert not orphan.exists() and fresh.exists()  # a write that may still be running is left alone
+
+
 def test_no_folder_means_no_cache(tmp_path):
     calls = []
     for _ in range(2):

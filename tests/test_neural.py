@@ -278,6 +278,9 @@ def test_a_warm_start_begins_near_the_volume_it_is_given(tmp_path):
     np.savez(tmp_path / "wrong.npz", sigma=truth[:-1])
     with pytest.raises(ValueError, match="shape .* but the probe grid is"):
         neural_solver(f"train.init_volume={tmp_path / 'wrong.npz'}")
+    np.save(tmp_path / "T.npy", cold.scene.truth_T)  # issue 28: a temperature file was fitted as sigma
+    with pytest.raises(ValueError, match=r"T.npy holds values 296.1 to .* \(a temperature in kelvin\?\), far outside"):
+        neural_solver(f"train.init_volume={tmp_path / 'T.npy'}")
 
 
 @pytest.mark.parametrize("overrides, perpendicular, expected", [

@@ -48,3 +48,24 @@ def test_a_time_series_is_written_frame_by_frame(tmp_path, capsys):
 
     a, b = (cv2.imread(str(d[0]), cv2.IMREAD_UNCHANGED).astype(float) for d in (d0, d1))
     assert np.abs(a - b).max() > 0  # the flame moved between the frames
+
+
+def test_an_existing_folder_or_a_file_is_refused_and_overwrite_replaces_it_whole(tmp_path, capsys):
+    """Issue 28: writing into an earlier capture overwrote rig.yaml and some images and left the rest (the folder
+    was then refused); onto a file, a FileExistsError traceback."""
+    root = main([str(tmp_path / "cap"), *SMALL])
+    before = {p.name: p.read_bytes() for p in root.iterdir()}
+    (tmp_path / "file").write_text("x")
+    for target, message in ((root, "is not empty: choose a new folder, or add --overwrite"),
+                            (tmp_path / "file", "is a file: give the folder")):
+        with pytest.raises(SystemExit) as e:
+            main([str(target), *SMALL, "rig.n_cameras=2"])
+        assert e.value.code == 2 and message in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in root.iterdir()} == before
+    with pytest.raises(SystemExit):
+        main([str(tmp_path / "typo"), *SMALL, "rig.n_camera=2"])
+    assert "rig.n_camera" in capsys.readouterr().err and not (tmp_path / "typo").exists()
+    main([str(root), *SMALL, "rig.n_cameras=2", "--overwrite"])
+    assert sorted(p.name for p in root.iterdir()) == ["distorted_00.png", "distorted_01.png", "reference_00.png",
+                                                      "reference_01.png", RIG_FILE]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cap", "file"]  # no staging folder left

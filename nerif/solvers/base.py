@@ -227,6 +227,15 @@ class IterativeSolver:
         raise ValueError(f"solver={self.name} cannot start a frame from the previous one: use "
                          "sequence.warm_start=false")
 
+    def _checkpoint(self, path: Path) -> None:
+        """Save a checkpoint; where the disk refuses it (full, removed), say so and go on: training, and the
+        results written after it, matter more than the checkpoint."""
+        try:
+            self.save(path)
+        except OSError as e:
+            log.warning("the checkpoint of iteration %d could not be written to %s (%s): training goes on",
+                        self.iteration, path, e.strerror or e)
+
     # --- loop ---
     def fit(self, *, checkpoint_every: int, checkpoint: Optional[Path] = None,
             on_eval: Optional[Callable[[dict], None]] = None, on_step: Optional[Callable[[int, dict], None]] = None,
@@ -262,7 +271,7 @@ class IterativeSolver:
                     due = self.iteration % checkpoint_every == 0 or done or (
                         checkpoint_every_s is not None and time.monotonic() - saved_at >= checkpoint_every_s)
                     if checkpoint is not None and due:
-                        self.save(checkpoint)
+                        self._checkpoint(checkpoint)
                         saved_at = time.monotonic()
                     if done:
                         break

@@ -153,6 +153,13 @@ class NeuralSolver(IterativeSolver):
         if vol.shape != tuple(self.scene.box.shape):
             raise ValueError(f"train.init_volume {path}: shape {vol.shape}, but the probe grid is "
                              f"{tuple(self.scene.box.shape)}")
+        a, b = self.interval
+        lo, hi = float(vol.min()), float(vol.max())
+        if lo < a - 0.5 * (b - a) or hi > b + 0.5 * (b - a):  # a temperature [K], or another quantity
+            what = " (a temperature in kelvin?)" if lo > 100 else ""
+            raise ValueError(f"train.init_volume {path} holds values {lo:.4g} to {hi:.4g}{what}, far outside the "
+                             f"field's sigma interval [{a:g}, {b:g}]: give a reconstruction.npz of nerif (its sigma "
+                             "is read)")
         t0 = time.perf_counter()
         rms = fit_to_volume(self.field, self.scene.box, torch.as_tensor(vol, device=self.device),
                             self.init_iterations, generator=self.generator)
