@@ -16,6 +16,7 @@ from omegaconf import DictConfig
 from nerif.configs import check_complete, group
 from nerif.data.frames import frames_of
 from nerif.io.folders import check_writable, run_folder
+from nerif.memory import check_memory
 from nerif.reconstruct import reconstruct, resuming
 from nerif.sequence import run_sequence
 
@@ -52,6 +53,10 @@ def resolve_threads(setting, parallel_jobs: int = 1) -> int:
         return max(1, cores // parallel_jobs)
     if isinstance(setting, bool) or not isinstance(setting, int) or setting < 1:
         raise ValueError(f"threads={setting}: auto or a number of CPU threads (at least 1)")
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if setting > cores:  # more threads than cores only wait on each other (38x slower with 1000 on 2 cores)
+        log.warning("threads=%d: this process may use %d core(s); running with %d", setting, cores, cores)
+        return cores
     return setting
 
 
@@ -81,6 +86,7 @@ def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     out_dir = Path(out_dir)
     check_complete(cfg)
     device = resolve_device(cfg.device)
+    check_memory(cfg, device)
     torch.set_num_threads(resolve_threads(cfg.threads, parallel_jobs))
     retain_freed_memory()
     check_writable(out_dir)
