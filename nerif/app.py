@@ -19,6 +19,7 @@ from nerif.io.folders import check_writable, run_folder
 from nerif.memory import check_memory
 from nerif.reconstruct import reconstruct, resuming
 from nerif.sequence import run_sequence
+from nerif.solvers.base import check_train
 
 DEVICES = "auto, cpu, cuda or cuda:N"
 log = logging.getLogger(__name__)
@@ -85,6 +86,7 @@ def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     check_complete(cfg)
+    check_train(group(cfg, "train"), cfg.seed)
     device = resolve_device(cfg.device)
     check_memory(cfg, device)
     torch.set_num_threads(resolve_threads(cfg.threads, parallel_jobs))

@@ -115,7 +115,7 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("solver=cgls solver.regularizer=tv", "needs a weight solver.lam > 0"),
     ("solver=cgls solver.lam=-1", "solver.lam=-1: a regularisation weight is at least 0"),
     ("+data.binning=4", "binning: not a setting of the dataset 'synthetic' (for binning, use rig.binning)"),
-    ("train.rays_per_batch=0", "rays per batch must be at least 1"),
+    ("train.rays_per_batch=0", "train.rays_per_batch=0: a whole number of at least 1"),
     ("sampler.samples_per_ray=1", "samples per ray K must be at least 2"),
     ("phantom.T_peak=0.5", "below 1 K"),
     ("loss.ambient_faces=[w]", "ambient faces"),
@@ -130,6 +130,14 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("phantom.T_peak=1000000", "beyond what the field can represent with data.T_max=2000 K (up to 2808 K"),
     ("+train.iteration=5", "train.iteration: not a setting nerif knows (did you mean train.iterations?)"),  # issue 28
     ("+seeds=3", "seeds: not a setting nerif knows (did you mean seed?)"),
+    ("train.iterations=abc", "train.iterations='abc': a whole number of at least 1"),
+    ("seed=abc", "seed='abc': a whole number"),
+    ("train.lr=0", "train.lr=0: the peak learning rate, a positive number"),
+    ("train.betas=[1.5,0.9]", "train.betas=[1.5, 0.9]: Adam's two decay rates, each within [0, 1)"),
+    ("train.lr_min=1", "train.lr_min=1: the learning rate's floor, within [0, train.lr = 0.005]"),
+    ("train.eps=0", "train.eps=0: Adam's denominator floor"),
+    ("train.checkpoint_every=0", "train.checkpoint_every=0: a whole number of at least 1"),
+    ("train.image_every=0", "train.image_every=0: a whole number of at least 1"),
 ])
 def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
     r = nerif(*TINY, *override.split(), f"hydra.run.dir={tmp_path}", cwd=ROOT)

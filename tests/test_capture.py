@@ -107,6 +107,8 @@ def _read(path):
     (lambda r: r["camera"].update(camera_to_background_mm=500), None, ValueError,
      "camera.camera_to_background_mm = 500 must exceed camera.camera_to_centre_mm"),
     (lambda r: r["camera"].update(focal_mm=-105), None, ValueError, "camera.focal_mm = -105 must be a positive number"),
+    (None, lambda d: (d / "rig.yaml").write_text("format: nerif-capture\nversion: [1\n"), ValueError,
+     "rig.yaml is not valid YAML \\(line 3\\)"),
     (lambda r: r["camera"].update(focal_mm="abc"), None, ValueError, "camera.focal_mm = 'abc' must be a positive"),
 ])
 def test_bad_capture_folders(written, tmp_path, monkeypatch, edit_rig, edit_files, error, message):

@@ -83,7 +83,12 @@ def read_rig(root: Path) -> dict:
     path = root / RIG_FILE
     if not path.is_file():
         raise FileNotFoundError(f"{path} does not exist: a capture folder needs a {RIG_FILE} beside its images")
-    rig = yaml.safe_load(path.read_text())
+    try:
+        rig = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        where = getattr(e, "problem_mark", None)
+        raise ValueError(f"{path} is not valid YAML{f' (line {where.line + 1})' if where else ''}: "
+                         f"{getattr(e, 'problem', None) or str(e).splitlines()[0]}") from None
     if not isinstance(rig, dict) or rig.get("format") != "nerif-capture":
         raise ValueError(f"{path} is not a nerif capture rig file (it needs 'format: nerif-capture')")
     if rig.get("version") not in READ_VERSIONS:

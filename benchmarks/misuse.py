@@ -1,0 +1,259 @@
+"""A user's mistakes, made from the command line as a user makes them, with tiny settings (issue 28).
+
+    python benchmarks/misuse.py                     # every case, a few minutes on 2 cores
+    python benchmarks/misuse.py --cases resume_other_scene swapped_images
+
+Each case runs ``python -m nerif ...`` (or ``python -m nerif.write_capture ...``) in a subprocess on fixtures
+made first (a finished tiny run, a tiny capture, copies of the paper's Phantom 1 files with one key edited).
+A verdict is OK only when the output holds no traceback, the message names the key or file (the expected
+fragment), the exit code is what the case calls for (a refusal: not 0; a warning: 0) and nothing is lost (the
+files a case must not touch are unchanged). Prints the table (case, exit code, first line of the message,
+verdict) and writes ``misuse.json`` and ``misuse.md`` under ``--out``.
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from ablation import write_report  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+PHANTOM1 = Path(os.environ.get("NERIF_SHARED", ROOT.parent / "shared")) / "data" / "nirbos_phantom1"
+TINY = ["device=cpu", "phantom=gaussian_blob", "phantom.shape=[16,16,16]", "phantom.voxel_mm=3.0",
+        "phantom.width_mm=7.0", "rig.n_cameras=6", "rig.binning=40", "sampler.samples_per_ray=16",
+        "train.iterations=20", "train.rays_per_batch=64", "train.eval_every=10", "metrics.eval_rays_per_view=32",
+        "train.progress=false", "data.cache_dir=null", "data.render_supersample=1", "field.finest_resolution=32",
+        "field.log2_table_size=12"]
+CAPTURE = ["rig.width_px=240", "rig.height_px=320", "rig.binning=8", "rig.n_cameras=5", "phantom=gaussian_blob",
+           "phantom.shape=[16,16,16]", "phantom.voxel_mm=2.0", "phantom.width_mm=6.0", "data.sensor.aperture_rays=4",
+           "data.render_supersample=1", "data.cache_dir=null"]
+SOLVER = [o for o in TINY if not o.startswith(("phantom", "rig.", "data."))]
+
+
+@dataclass
+class Case:
+    name: str
+    args: list[str]             # after ``python -m``
+    expect: str                 # refuse | warn
+    fragment: str               # what the message must say (the key or the file)
+    keep: list[Path] = field(default_factory=list)  # files the case must leave as they were
+    env: dict = field(default_factory=dict)
+    during: Optional[Callable[[], subprocess.Popen]] = None  # a process running while the case runs
+
+
+def digest(paths: list[Path]) -> dict:
+    return {str(p): hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else None for p in paths}
+
+
+def nerif(*args: str) -> list[str]:
+    return ["nerif", *args]
+
+
+def fixtures(work: Path) -> dict:
+    """A finished tiny run, a tiny capture and its edited copies, Phantom 1 with edited json files."""
+    fx = {"run": work / "run", "capture": work / "capture"}
+    if not (fx["run"] / "metrics.json").is_file():
+        shutil.rmtree(fx["run"], ignore_errors=True)
+        subprocess.run([sys.executable, "-m", "nerif", *TINY, f"hydra.run.dir={fx['run']}"], cwd=ROOT, check=True,
+                       capture_output=True)
+    if not (fx["capture"] / "rig.yaml").is_file():
+        shutil.rmtree(fx["capture"], ignore_errors=True)
+        subprocess.run([sys.executable, "-m", "nerif.write_capture", str(fx["capture"]), *CAPTURE], cwd=ROOT,
+                       check=True, capture_output=True)
+
+    def capture_variant(name: str, edit=None, text: Optional[str] = None) -> Path:
+        dst = work / name
+        shutil.rmtree(dst, ignore_errors=True)
+        shutil.copytree(fx["capture"], dst)
+        rig = yaml.safe_load((dst / "rig.yaml").read_text())
+        if edit is not None:
+            edit(rig)
+        (dst / "rig.yaml").write_text(text if text is not None else yaml.safe_dump(rig))
+        return dst
+
+    def swap(rig):
+        v = rig["views"]
+        v["images"], v["references"] = v["references"], v["images"]
+
+    fx["swapped"] = capture_variant("swapped", swap)
+    fx["background_near"] = capture_variant("background_near", lambda r: r["camera"].update(camera_to_background_mm=500))
+    fx["focal_abc"] = capture_variant("focal_abc", lambda r: r["camera"].update(focal_mm="abc"))
+    fx["rig_syntax"] = capture_variant("rig_syntax", text="format: nerif-capture\nversion: [1\n")
+    fx["radians"] = capture_variant("radians", lambda r: r["views"].update(
+        angles_deg=[float(np.deg2rad(a)) for a in r["views"]["angles_deg"]]))
+    T = np.load(fx["run"] / "reconstruction.npz")["T"]
+    np.save(work / "T.npy", T)
+    for name, edit in (("fl_x_negative", {"fl_x": -5618.7}), ("image_range_zero", {"image_max": -16.8897858})):
+        dst = work / name
+        shutil.rmtree(dst, ignore_errors=True)
+        dst.mkdir()
+        for split in ("train", "val", "test"):
+            meta = json.loads((PHANTOM1 / f"transforms_{split}.json").read_text())
+            meta.update(edit)
+            (dst / f"transforms_{split}.json").write_text(json.dumps(meta))
+            (dst / split).symlink_to(PHANTOM1 / split)
+        (dst / "3Dmask.mat").symlink_to(PHANTOM1 / "3Dmask.mat")
+        fx[name] = dst
+    cut = work / "cut.pt"
+    data = (fx["run"] / "checkpoint.pt").read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    fx["cut"] = cut
+    corrupt = work / "cache"
+    shutil.rmtree(corrupt, ignore_errors=True)
+    subprocess.run([sys.executable, "-m", "nerif", *TINY, "data.cache_dir=" + str(corrupt), "train.iterations=1",
+                    f"hydra.run.dir={work / 'cache_run'}", "train.resume=auto"], cwd=ROOT, capture_output=True)
+    for entry in corrupt.glob("*.npz"):
+        entry.write_bytes(entry.read_bytes()[:64])
+    fx["cache"] = corrupt
+    return fx
+
+
+def cases(work: Path, fx: dict) -> list[Case]:
+    run = fx["run"]
+    kept = [run / "metrics.json", run / "checkpoint.pt", run / "reconstruction.npz"]
+    tr = lambda root: ["data=transforms", f"data.root={root}", "data.binning=8", *SOLVER]  # noqa: E731
+    cap = lambda root, *more: ["data=capture", f"data.root={root}", "data.binning=8", *SOLVER, *more]  # noqa: E731
+    out = lambda name: f"hydra.run.dir={work / 'runs' / name}"  # noqa: E731
+    lock_dir = work / "runs" / "locked"
+
+    def long_run() -> subprocess.Popen:
+        shutil.rmtree(lock_dir, ignore_errors=True)
+        p = subprocess.Popen([sys.executable, "-m", "nerif", *TINY, "train.iterations=100000", f"hydra.run.dir={lock_dir}"],
+                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        for _ in range(600):
+            if (lock_dir / ".nerif.lock").is_file() and (lock_dir / ".nerif.lock").read_text():
+                break
+            time.sleep(0.1)
+        return p
+
+    return [
+        # silent wrong results
+        Case("resume_other_scene", nerif(*TINY, "phantom.width_mm=9.0", f"train.resume={run / 'checkpoint.pt'}",
+                                         out("resume_other")), "refuse", "made by another run", kept),
+        Case("swapped_images", nerif(*cap(fx["swapped"]), out("swapped")), "refuse", "look swapped"),
+        Case("background_before_probe", nerif(*cap(fx["background_near"]), out("bg")), "refuse",
+             "camera.camera_to_background_mm"),
+        Case("negative_focal_length", nerif(*TINY, "rig.focal_mm=-105", out("focal")), "refuse", "rig.focal_mm"),
+        Case("negative_distance", nerif(*TINY, "rig.distance_mm=-800", out("distance")), "refuse", "rig.distance_mm"),
+        Case("transforms_negative_fl_x", nerif(*tr(fx["fl_x_negative"]), out("flx")), "refuse", "fl_x"),
+        Case("angles_in_radians", nerif(*cap(fx["radians"]), out("radians")), "warn", "radians"),
+        Case("two_runs_one_folder", nerif(*TINY, f"hydra.run.dir={lock_dir}", "train.resume=auto"), "refuse",
+             "another nerif run", during=long_run),
+        Case("init_volume_temperature", nerif(*TINY, f"train.init_volume={work / 'T.npy'}", out("init")), "refuse",
+             "T.npy holds values"),
+        Case("transforms_constant_range", nerif(*tr(fx["image_range_zero"]), out("range")), "refuse", "image_max"),
+        Case("stray_key_plain_block", nerif(*TINY, "+train.iteration=5", out("stray")), "refuse",
+             "did you mean train.iterations"),
+        # lost work
+        Case("new_run_into_run_folder", nerif(*TINY, f"hydra.run.dir={run}"), "refuse", "holds an earlier run", kept),
+        Case("write_capture_into_capture", ["nerif.write_capture", str(fx["capture"]), *CAPTURE, "rig.n_cameras=3"],
+             "refuse", "is not empty", [fx["capture"] / "rig.yaml", fx["capture"] / "distorted_00.png"]),
+        Case("write_capture_onto_file", ["nerif.write_capture", str(work / "T.npy"), *CAPTURE], "refuse", "is a file",
+             [work / "T.npy"]),
+        Case("write_capture_typo", ["nerif.write_capture", str(work / "typo"), *CAPTURE, "rig.n_camera=3"], "refuse",
+             "rig.n_camera"),
+        # sizes
+        Case("occupancy_2000", nerif(*TINY, "field.occupancy_resolution=2000", out("occ")), "refuse",
+             "field.occupancy_resolution"),
+        Case("hidden_1e5", nerif(*TINY, "field.hidden=[100000,100000]", out("hidden")), "refuse", "field.hidden"),
+        Case("supersample_32", nerif(*TINY, "phantom.shape=[64,64,64]", "data.render_supersample=32", out("ss")),
+             "refuse", "data.render_supersample"),
+        Case("rays_5e6", nerif(*TINY, "train.rays_per_batch=5000000", out("rays")), "refuse", "train.rays_per_batch"),
+        Case("samples_2e5", nerif(*TINY, "sampler.samples_per_ray=200000", out("samples")), "refuse",
+             "sampler.samples_per_ray"),
+        Case("threads_1000", nerif(*TINY, "threads=1000", "train.iterations=2", out("threads")), "warn", "threads=1000"),
+        # one sentence
+        Case("rig_yaml_syntax", nerif(*cap(fx["rig_syntax"]), out("syntax")), "refuse", "rig.yaml is not valid YAML"),
+        Case("rig_focal_abc", nerif(*cap(fx["focal_abc"]), out("abc")), "refuse", "camera.focal_mm"),
+        Case("iterations_abc", nerif(*TINY, "train.iterations=abc", out("itabc")), "refuse", "train.iterations"),
+        Case("seed_abc", nerif(*TINY, "seed=abc", out("seed")), "refuse", "seed="),
+        Case("lr_zero", nerif(*TINY, "train.lr=0", out("lr0")), "refuse", "train.lr"),
+        Case("lr_negative", nerif(*TINY, "train.lr=-1", out("lrneg")), "refuse", "train.lr"),
+        Case("betas_out_of_range", nerif(*TINY, "train.betas=[1.5,0.9]", out("betas")), "refuse", "train.betas"),
+        Case("lr_min_above_lr", nerif(*TINY, "train.lr_min=1", out("lrmin")), "refuse", "train.lr_min"),
+        Case("eps_zero", nerif(*TINY, "train.eps=0", out("eps")), "refuse", "train.eps"),
+        Case("checkpoint_every_zero", nerif(*TINY, "train.checkpoint_every=0", out("ck0")), "refuse",
+             "train.checkpoint_every"),
+        Case("image_every_zero", nerif(*TINY, "train.image_every=0", out("im0")), "refuse", "train.image_every"),
+        Case("truncated_checkpoint", nerif(*TINY, f"train.resume={fx['cut']}", out("cut")), "refuse",
+             "cut.pt is not a readable checkpoint"),
+        Case("nerif_checkpoint_into_cgls", nerif(*TINY, "solver=cgls", f"train.resume={run / 'checkpoint.pt'}",
+                                                 out("cgls")), "refuse", "made by another run"),
+        Case("resume_run_folder", nerif(*TINY, "train.iterations=25", f"train.resume={run}", out("folder")), "warn",
+             "resumed from"),
+        Case("corrupt_cache_entry", nerif(*TINY, f"data.cache_dir={fx['cache']}", "train.iterations=2", out("cache")),
+             "warn", "is damaged"),
+    ]
+
+
+def first_line(text: str, fragment: str) -> str:
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    hit = [ln for ln in lines if fragment in ln]
+    line = hit[0] if hit else (lines[-1] if lines else "")
+    return line if len(line) <= 160 else line[:157] + "..."
+
+
+def run_case(case: Case) -> dict:
+    before = digest(case.keep)
+    other = case.during() if case.during else None
+    t0 = time.perf_counter()
+    try:
+        r = subprocess.run([sys.executable, "-m", *case.args], cwd=ROOT, capture_output=True, text=True,
+                           timeout=300, env={**os.environ, **case.env})
+        rc, text = r.returncode, r.stdout + r.stderr
+    except subprocess.TimeoutExpired:
+        rc, text = None, "timed out after 300 s"
+    finally:
+        if other is not None:
+            other.kill()
+            other.wait()
+    lost = digest(case.keep) != before
+    traceback = "Traceback" in text
+    named = case.fragment in text
+    code_ok = rc is not None and ((rc != 0) if case.expect == "refuse" else (rc == 0))
+    verdict = "OK" if named and code_ok and not traceback and not lost else (
+        "traceback" if traceback else "lost work" if lost else "unnamed" if not named else "exit code")
+    return {"case": case.name, "expect": case.expect, "exit": rc, "message": first_line(text, case.fragment),
+            "verdict": verdict, "seconds": round(time.perf_counter() - t0, 1)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--cases", nargs="+", default=None, help="names of the cases to run (all by default)")
+    ap.add_argument("--out", default="benchmarks/results/misuse", help="output folder")
+    args = ap.parse_args()
+    out = Path(args.out).resolve()
+    work = out / "work"
+    work.mkdir(parents=True, exist_ok=True)
+    fx = fixtures(work)
+    todo = [c for c in cases(work, fx) if args.cases is None or c.name in args.cases]
+    rows = []
+    for i, case in enumerate(todo):
+        rows.append(run_case(case))
+        print(f"[{i + 1}/{len(todo)}] {case.name}: {rows[-1]['verdict']}", flush=True)
+    ok = sum(r["verdict"] == "OK" for r in rows)
+    lines = [f"# Misuse: {ok} of {len(rows)} cases OK", "", "| case | expected | exit | first line of the message | verdict |",
+             "|---|---|---|---|---|"]
+    lines += [f"| {r['case']} | {r['expect']} | {r['exit']} | {r['message'].replace('|', '/')} | {r['verdict']} |"
+              for r in rows]
+    counts = {v: sum(r["verdict"] == v for r in rows) for v in sorted({r["verdict"] for r in rows})}
+    lines += ["", "Verdicts: " + ", ".join(f"{k} {v}" for k, v in counts.items())]
+    write_report(out, "misuse", {"rows": rows, "counts": counts}, "\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
