@@ -26,12 +26,25 @@ def parallel_jobs() -> int:
     return max(1, n if n > 0 else (os.cpu_count() or 1) + 1 + n)
 
 
+def check_overrides(cfg: DictConfig, overrides) -> None:
+    """One sentence for a command-line setting the run ignores: the synthetic rig's (``rig.*``) with recorded
+    data, whose cameras come from the data's own files."""
+    if cfg.data.name == "synthetic":
+        return
+    ignored = [o for o in overrides if o.lstrip("+~").startswith("rig.")]
+    if ignored:
+        binning = " (the binning of recorded data is data.binning)" if any("binning" in o for o in ignored) else ""
+        raise ValueError(f"{', '.join(ignored)}: rig.* describes the synthetic rig; data={cfg.data.name} takes its "
+                         f"cameras from its own files{binning}")
+
+
 @hydra.main(version_base=None, config_path=str(config_dir()), config_name="config")
 def main(cfg: DictConfig) -> float:
     try:
+        check_overrides(cfg, HydraConfig.get().overrides.task)
         metrics = run(cfg, HydraConfig.get().runtime.output_dir, parallel_jobs())
     except (ValueError, FileNotFoundError, DivergenceError) as e:  # bad input or a diverged run: one sentence
-        message = str(e.args[0] if e.args else e)
+        message = str(e.args[0] if len(e.args) == 1 else e)  # an OSError's own: "[Errno 2] ...: 'path'"
         logging.getLogger("nerif").error("%s", message)
         if HydraConfig.get().mode.name == "MULTIRUN":  # the sweep goes on; its summary lists the job as failed
             write_json({"error": message}, Path(HydraConfig.get().runtime.output_dir) / FAILED)
@@ -43,6 +56,9 @@ def main(cfg: DictConfig) -> float:
         if e.signal_name == "SIGUSR2" and callable(launcher_handler):  # submitit's: it requeues the job, which
             launcher_handler(number, None)                            # resumes from this checkpoint
         sys.exit(128 + int(number))
+    except KeyboardInterrupt:  # Ctrl-C before training (the flow, the rendering): nothing was made to keep
+        logging.getLogger("nerif").error("interrupted before training began: nothing to save")
+        sys.exit(130)
     return metrics.get("temperature_rmse_K", metrics["deflection_rmse"])
 
 

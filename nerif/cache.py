@@ -124,6 +124,18 @@ def evict(folder: Path, limit_bytes: float, keep: Path) -> None:
             log.info("cache: removed %s (the cache holds at most NERIF_CACHE_MAX_MB)", p.name)
 
 
+def usable(folder: Path) -> None:
+    """The cache folder exists (made if need be) and takes files; one sentence otherwise, before any work."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".probe-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise ValueError(f"the cache folder {folder} (data.cache_dir, default $NERIF_CACHE) cannot be written "
+                         f"({e.strerror or e}): point it at a writable folder, or set data.cache_dir=null") from None
+
+
 def cached_arrays(cache_dir, prefix: str, payload: dict, compute: Callable[[], dict]) -> dict:
     """``compute()`` (a dict of arrays), stored as ``<cache_dir>/<prefix>-<hash>.npz`` and read back from there
     next time; the hash is that of ``payload`` (which must name the content of every input, e.g. with
@@ -132,6 +144,8 @@ def cached_arrays(cache_dir, prefix: str, payload: dict, compute: Callable[[], d
     text = json.dumps({"payload": payload, "code": forward_model_version()}, sort_keys=True, default=str)
     key = hashlib.sha256(text.encode()).hexdigest()[:16]
     path = Path(cache_dir).expanduser() / f"{prefix}-{key}.npz" if cache_dir else None
+    if path is not None:
+        usable(path.parent)
     if path is not None and path.is_file():
         try:
             with np.load(path, allow_pickle=False) as f:

@@ -130,7 +130,14 @@ def prior_interval(configured=None, data_prior=None) -> tuple[float, float]:
     """The field's prior interval: ``configured`` (``field.prior``) when set, else the one the data give
     (``data_prior``), else :data:`DEFAULT_PRIOR`."""
     prior = configured if configured is not None else (data_prior or DEFAULT_PRIOR)
-    return float(prior[0]), float(prior[1])
+    try:
+        a, b = (float(x) for x in prior)
+    except (TypeError, ValueError):
+        a = b = float("nan")
+    if not a <= 0.0 <= b or not a < b:
+        raise ValueError(f"{'field.prior' if configured is not None else 'the data give the prior'} {list(prior)}: "
+                         "an increasing pair [a, b] of sigma with a <= 0 <= b (ambient gas is sigma = 0)")
+    return a, b
 
 
 def check_truth_within(truth_T: Optional[np.ndarray], ambient: Ambient, prior: tuple[float, float]) -> None:
@@ -139,7 +146,12 @@ def check_truth_within(truth_T: Optional[np.ndarray], ambient: Ambient, prior: t
     if truth_T is None or not ambient.temperature_known:
         return
     sigma = ambient.sigma_from_temperature(truth_T)
-    if sigma.min() < prior[0] - 1e-6 or sigma.max() > prior[1] + 1e-6:
+    if sigma.max() > prior[1] + 1e-6:  # colder than the cold bound: no T_max helps
+        coldest = float(truth_T.min())
+        raise ValueError(f"the true field reaches {coldest:.0f} K, colder than ambient ({ambient.T0:g} K) by more than "
+                         f"the field can represent (its prior's cold bound sigma = {prior[1]:g}): set the phantom's T0 "
+                         f"to its coldest gas, or field.prior=[{prior[0]:g}, {np.ceil(sigma.max() * 100) / 100:g}]")
+    if sigma.min() < prior[0] - 1e-6:
         hottest = float(truth_T.max())
         bound = float(ambient.temperature_from_sigma(np.float64(prior[0])))
         raise ValueError(f"the true field reaches {hottest:.0f} K, beyond what the field can represent with "

@@ -30,10 +30,13 @@ def value_range(x: torch.Tensor) -> float:
 def psnr_db(pred: torch.Tensor, obs: torch.Tensor, peak: float | None = None) -> float:
     """Peak signal-to-noise ratio of (R, C) predictions against observations: 10 log10(peak^2 / MSE), MSE the
     mean over rays and components, ``peak`` the observations' :func:`value_range` unless given (give the range of
-    every observation when scoring a subset, so that subsets are comparable)."""
+    every observation when scoring a subset, so that subsets are comparable). NaN where the observations span no
+    range (undefined, not -inf)."""
     obs = obs.double()
     mse = float(((pred.double() - obs) ** 2).mean())
     peak = value_range(obs) if peak is None else peak
+    if not peak > 0:  # observations all equal (a view that sees no deflection): no peak to compare with
+        return float("nan")
     return float("inf") if mse == 0 else 10.0 * float(np.log10(peak**2 / mse))
 
 

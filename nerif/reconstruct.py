@@ -50,10 +50,9 @@ def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Opt
     solver = SOLVERS.build(group(cfg, "solver"))
     extra = {} if frame is None else {"frame": frame}
     scene = DATASETS.build(group(cfg, "data"), device=str(device), **extra)
-    sign_warnings = check_sign(scene, cfg.field.prior)
     masks = MASKS.build(group(cfg, "mask"), scene=scene)
-    solver.setup(scene, masks)
-    rig_warnings = sign_warnings + ill_posed(scene)
+    solver.setup(scene, masks)  # checks a known truth against the prior first
+    rig_warnings = check_sign(scene, cfg.field.prior) + ill_posed(scene)
     tc = cfg.train
     write_masks(masks, scene, out_dir)
     write_sensing(scene, out_dir)
@@ -123,10 +122,11 @@ def check_sign(scene, prior) -> list[str]:
     if evidence <= 0.2:
         return []
     msg = (f"the deflections point the way gas colder than ambient bends light (hot evidence {evidence:+.2f}; a "
-           "flame gives -0.3 to -1): the reference and distorted images look swapped")
+           "flame gives -0.3 to -1): " + ("the reference and distorted images look swapped" if scene.images is not None
+                                          else "their sign looks reversed"))
     if prior is None:
-        raise ValueError(f"{msg}; swap them, or for gas that is colder than ambient set field.prior=[a, b] with b "
-                         "above its coldest sigma")
+        raise ValueError(f"{msg}; {'swap them' if scene.images is not None else 'check the data'}, or for gas that is "
+                         "colder than ambient set field.prior=[a, b] with b above its coldest sigma")
     log.warning("%s", msg)
     return [msg]
 

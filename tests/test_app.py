@@ -138,6 +138,8 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("train.eps=0", "train.eps=0: Adam's denominator floor"),
     ("train.checkpoint_every=0", "train.checkpoint_every=0: a whole number of at least 1"),
     ("train.image_every=0", "train.image_every=0: a whole number of at least 1"),
+    ("field.prior=[0.05,-1.05]", "field.prior [0.05, -1.05]: an increasing pair [a, b] of sigma with a <= 0 <= b"),
+    ("phantom.T_peak=150", "colder than ambient (296.15 K) by more than the field can represent"),  # not "T_max"
 ])
 def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
     r = nerif(*TINY, *override.split(), f"hydra.run.dir={tmp_path}", cwd=ROOT)

@@ -125,3 +125,15 @@ def test_an_edit_to_a_file_of_the_forward_model_misses_the_cache(tmp_path, monke
         cache._digest.cache_clear()  # the code is read once per process: this is the next process
         cached_arrays(tmp_path / "c", "obs", {"k": 1}, compute)
     assert len(calls) == 3  # each edit: a miss, computed again
+
+
+def test_an_unwritable_cache_folder_is_one_sentence_before_any_work(tmp_path):
+    """Issue 28: NERIF_CACHE=/proc/x printed "ERROR - 2"; pointing at a file failed after the observations."""
+    import pytest
+
+    (tmp_path / "file").write_text("x")
+    calls = []
+    for folder in (tmp_path / "file", Path("/proc/nerif-cache")):
+        with pytest.raises(ValueError, match=f"the cache folder {folder} .* cannot be written .*data.cache_dir=null"):
+            cached_arrays(folder, "obs", {"k": 1}, lambda: calls.append(1) or {"x": np.zeros(1)})
+    assert calls == []

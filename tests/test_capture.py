@@ -97,6 +97,8 @@ def _read(path):
      "distorted_02.png is 240 x 312 px but the rig's sensor_px is 240 x 320"),
     (None, lambda d: _write(d / "reference_01.png", _read(d / "reference_01.png").astype(np.uint16) * 257),
      ValueError, "same bit depth"),
+    (None, lambda d: [_write(d / f"distorted_{k:02d}.png", _read(d / f"distorted_{k:02d}.png").astype(np.uint16) * 257)
+                      for k in range(7)], ValueError, "same bit depth"),  # issue 28: 16-bit images, 8-bit references
     (None, lambda d: _write(d / "distorted_00.png", np.repeat(_read(d / "distorted_00.png")[..., None], 3, -1)),
      ValueError, "colour image"),
     (lambda r: r.update(roi_px=[200, 0, 100, 320]), None, ValueError, "roi_px .* is not inside"),
@@ -138,6 +140,20 @@ def test_swapped_reference_and_distorted_images_are_refused_before_training(writ
     with pytest.raises(ValueError, match="the reference and distorted images look swapped; swap them"):
         run(cfg, tmp_path / "run")
     assert not (tmp_path / "run" / "checkpoint.pt").exists()
+
+
+def test_no_held_out_view_trains_on_every_view_and_a_rig_setting_is_refused(written, tmp_path):
+    """Issue 28: data.heldout=[] failed after the flow; rig.binning=4 with a capture was ignored without a word."""
+    import subprocess
+    import sys
+
+    every = capture(str(written[0]), FLOW, binning=8, heldout=[])
+    assert every.n_views == 7 and every.heldout is None
+    r = subprocess.run([sys.executable, "-m", "nerif", "data=capture", f"data.root={written[0]}", "rig.binning=4",
+                        f"hydra.run.dir={tmp_path}"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "Traceback" not in r.stderr + r.stdout
+    assert "rig.binning=4: rig.* describes the synthetic rig; data=capture takes its cameras from its own files (the " \
+           "binning of recorded data is data.binning)" in r.stderr + r.stdout
 
 
 def test_one_shared_reference(written, tmp_path):

@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 import torch
@@ -26,3 +28,7 @@ def test_psnr_against_the_observed_range():
     # error 0.02 everywhere, peak-to-peak 2: 10 log10(4 / 4e-4) = 40 dB
     assert psnr_db(obs + 0.02, obs) == pytest.approx(40.0, abs=1e-4)
     assert psnr_db(obs, obs) == float("inf")
+    zero = torch.zeros_like(obs)  # issue 28: a view without deflections printed "PSNR -inf dB" and a numpy warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.isnan(psnr_db(obs, zero))

@@ -42,6 +42,26 @@ def test_resuming_a_checkpoint_continues_exactly(tmp_path):
         torch.testing.assert_close(a, b)
 
 
+def test_a_resume_with_more_iterations_continues_the_schedule_as_if_planned_so(tmp_path):
+    """Issue 28: a resume from 50 to 120 iterations restarted the cosine schedule at its peak (or, continued
+    as it was, would have held it at its floor): it goes on as the longer run's own schedule."""
+    short = neural_solver("train.iterations=10")
+    for _ in range(10):
+        short.step()
+    short.save(tmp_path / "ck.pt")
+    longer = neural_solver("train.iterations=20")
+    longer.load(tmp_path / "ck.pt")
+    straight = neural_solver("train.iterations=20")
+    for _ in range(10):
+        straight.step()
+    assert longer.optimizer.param_groups[0]["lr"] == pytest.approx(straight.optimizer.param_groups[0]["lr"], rel=1e-9)
+    assert longer.optimizer.param_groups[0]["lr"] == pytest.approx(5e-3 / 2, rel=1e-3)  # half-way down the cosine
+    for _ in range(10):
+        longer.step()
+        straight.step()
+        assert longer.optimizer.param_groups[0]["lr"] == pytest.approx(straight.optimizer.param_groups[0]["lr"], rel=1e-6)
+
+
 def test_a_checkpoint_without_an_average_resumes_and_averages_from_the_next_step(tmp_path):
     """A checkpoint of a nerif before ``train.ema_decay`` holds no average: the run resumes, its outputs are the
     trained field's until the next step, whose weights the average then starts from."""

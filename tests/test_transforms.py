@@ -113,15 +113,20 @@ def test_bad_dataset_folders(tmp_path):
 @pytest.mark.parametrize("edit, message", [
     ({"image_max": -16.8897858}, r"image_max \(-16.8897858\) must exceed image_min"),  # equal to image_min
     ({"fl_x": -1000.0}, r"the focal length fl_x = -1000.0 px must be positive"),
+    ({"w": 721}, r"images are 720 x 1280 px, the json's w and h say 721 x 1280"),  # not blamed on the binning
+    ({"frames": {"a": 1}}, r"frames must be a list \(one entry per view\), not a dict"),
+    ({"frames": [{"transform_matrix": [[1, 0, 0, 0]] * 4}]}, r"frame 0 lacks file_path, mask_file_path"),
+    ("{", r"transforms_train.json is not valid JSON \(line 1\)"),
 ])
-def test_a_constant_deflection_range_or_a_negative_focal_length_is_refused(tmp_path, edit, message):
-    """Issue 28: image_min == image_max trained on constant deflections; a negative fl_x gave 4.2 against 0.73."""
+def test_a_bad_transforms_file_is_one_sentence_naming_it(tmp_path, edit, message):
+    """Issue 28: image_min == image_max trained on constant deflections; a negative fl_x gave 4.2 against 0.73; a
+    truncated file, frames as a dict or without file_path were tracebacks; a wrong w was blamed on the binning."""
     import json
 
     for split in ("train", "val", "test"):
         meta = json.loads((ROOT / f"transforms_{split}.json").read_text())
-        meta.update(edit)
-        (tmp_path / f"transforms_{split}.json").write_text(json.dumps(meta))
+        text = edit if isinstance(edit, str) else json.dumps({**meta, **edit})
+        (tmp_path / f"transforms_{split}.json").write_text(text)
         (tmp_path / split).symlink_to(ROOT / split)
     with pytest.raises(ValueError, match=message):
         transforms(str(tmp_path), PROBE, 1100.0, 1.00007253, sigma_prior=None)

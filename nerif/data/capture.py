@@ -297,8 +297,8 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
             raise ValueError(f"{cam.name}: no pixel of roi_px {rig['roi_px']} sees the probe box "
                              f"{box.extent_mm.tolist()} mm ({root / RIG_FILE}): check the region of interest, the "
                              "distances and the probe box")
-    images = read_images(distorted, rig["camera"]["sensor_px"])
-    refs = read_images(references, rig["camera"]["sensor_px"])
+    both = read_images(distorted + references, rig["camera"]["sensor_px"])  # one bit depth for all
+    images, refs = both[:len(distorted)], both[len(distorted):]
 
     eps_images = []
     for v, (cam, cam_full) in enumerate(zip(cameras, full)):

@@ -122,8 +122,10 @@ class Scene:
                        sensing=None, images=images)
 
     def split_views(self, heldout) -> "Scene":
-        """The scene of every view but ``heldout``, with those as its ``heldout`` scene."""
+        """The scene of every view but ``heldout``, with those as its ``heldout`` scene (none: every view)."""
         held = heldout_views(heldout, self.n_views)
+        if not held:  # every view trains
+            return replace(self, heldout=None)
         train = self.select_views([v for v in range(self.n_views) if v not in held])
         train.heldout = self.select_views(held)
         return train

@@ -58,12 +58,24 @@ def read_split(root: Path, split: str) -> dict:
     path = root / f"transforms_{split}.json"
     if not path.is_file():
         raise FileNotFoundError(f"{path} does not exist: data.root must be a folder with transforms_{split}.json")
-    meta = json.loads(path.read_text())
+    try:
+        meta = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path} is not valid JSON (line {e.lineno}): {e.msg}") from None
+    if not isinstance(meta, dict):
+        raise ValueError(f"{path} holds no JSON object of keys")
     missing = [k for k in _KEYS if k not in meta]
     if missing:
         raise ValueError(f"{path} lacks {', '.join(missing)}")
+    if not isinstance(meta["frames"], list):
+        raise ValueError(f"{path}: frames must be a list (one entry per view), not a {type(meta['frames']).__name__}")
     if not meta["frames"]:
         raise ValueError(f"{path} has no frames")
+    for k, fr in enumerate(meta["frames"]):
+        lacks = [key for key in ("file_path", "mask_file_path", "transform_matrix")
+                 if not isinstance(fr, dict) or key not in fr]
+        if lacks:
+            raise ValueError(f"{path}: frame {k} lacks {', '.join(lacks)}")
     try:
         lo, hi = float(meta["image_min"]), float(meta["image_max"])
     except (TypeError, ValueError):
@@ -81,12 +93,12 @@ def read_frame(root: Path, split: str, meta: dict, k: int, optics: dict):
     lo, hi = float(meta["image_min"]), float(meta["image_max"])
     fr = meta["frames"][k]
     name = f"{split} view {k} ({fr['file_path']})"
-    cam = camera_from_nerf_pose(fr["transform_matrix"], float(meta["fl_x"]), w, h, float(meta["cx"]),
-                                float(meta["cy"]), name=name, **optics)
     img = read_png(_path(root, fr["file_path"], name), 3)
     mask = read_png(_path(root, fr["mask_file_path"], name), 3)
     if img.shape[:2] != (h, w) or mask.shape[:2] != (h, w):
-        raise ValueError(f"{name}: images are {img.shape[1]} x {img.shape[0]} px, the json says {w} x {h}")
+        raise ValueError(f"{name}: images are {img.shape[1]} x {img.shape[0]} px, the json's w and h say {w} x {h}")
+    cam = camera_from_nerf_pose(fr["transform_matrix"], float(meta["fl_x"]), w, h, float(meta["cx"]),
+                                float(meta["cy"]), name=name, **optics)
     eps = cv2.cvtColor(img, cv2.COLOR_BGR2RGB).astype(np.float64) / 65535.0 * (hi - lo) + lo
     u, v, du, dv = (int(x) for x in fr.get("UVROI", [1, 1, w, h]))  # 1-based
     roi = region_of_interest(u - 1, v - 1, du, dv, w, h, f"{name}: UVROI {fr.get('UVROI')} (1-based u, v, w, h)")
@@ -97,11 +109,11 @@ def load_views(root: Path, split: str, box: ProbeBox, ambient: Ambient, optics: 
                device="cpu", **fields) -> Scene:
     """The views of one split as a scene (deflections in sigma units, the split's own 2-D masks and ROI)."""
     meta = read_split(root, split)
-    if int(meta["w"]) % binning or int(meta["h"]) % binning:
-        raise ValueError(f"data.binning={binning} must divide the image size {meta['w']} x {meta['h']} px")
     cameras, eps_images, valid, masks = [], [], [], []
     for k in range(len(meta["frames"])):
-        cam, eps, roi, mask = read_frame(root, split, meta, k, optics)
+        cam, eps, roi, mask = read_frame(root, split, meta, k, optics)  # the first checks w and h against its image
+        if int(meta["w"]) % binning or int(meta["h"]) % binning:
+            raise ValueError(f"data.binning={binning} must divide the image size {meta['w']} x {meta['h']} px")
         cam = cam.binned(binning) if binning > 1 else cam
         cameras.append(cam)
         eps_images.append(resample(eps * ambient.delta_thre, cam.height, cam.width))  # block means

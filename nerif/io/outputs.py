@@ -106,10 +106,13 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
     unit = "sigma" if "deflection_unit" in m else "rad"
     parts.append(f"deflection RMSE {m['deflection_rmse']:.3g} {unit}")
     if known("heldout_deflection_rmse"):
-        held = [f"deflection RMSE {m['heldout_deflection_rmse']:.3g} {unit}, PSNR {m['heldout_psnr_db']:.1f} dB"]
+        def psnr(k: str) -> str:
+            return f"PSNR {m[k]:.1f} dB" if known(k) else "PSNR undefined (no deflection seen)"
+
+        held = [f"deflection RMSE {m['heldout_deflection_rmse']:.3g} {unit}, {psnr('heldout_psnr_db')}"]
         if known("heldout_displacement_rmse_px"):
-            held.append(f"displacement RMSE {m['heldout_displacement_rmse_px']:.3g} px, PSNR "
-                        f"{m['heldout_displacement_psnr_db']:.1f} dB")
+            held.append(f"displacement RMSE {m['heldout_displacement_rmse_px']:.3g} px, "
+                        f"{psnr('heldout_displacement_psnr_db')}")
         if known("heldout_photometric_rmse"):
             ref = (f" (the flow's {100 * m['heldout_photometric_rmse_flow']:.2f} %, none "
                    f"{100 * m['heldout_photometric_rmse_none']:.2f} %)" if known("heldout_photometric_rmse_flow") else "")

@@ -340,6 +340,15 @@ class NeuralSolver(IterativeSolver):
             raise ValueError("the checkpoint's optimiser state does not fit this solver (made by a nerif before "
                              f"train.table_decay, or with another encoder): {str(e).splitlines()[0]}") from None
         self.scheduler.load_state_dict(st["scheduler"])
+        planned = self.scheduler.T_max
+        if planned != self.iterations:  # train.iterations changed on resume: the schedule as if planned so from the start
+            sch, t = self.scheduler, self.scheduler.last_epoch
+            sch.T_max = self.iterations
+            for g, base in zip(self.optimizer.param_groups, sch.base_lrs):
+                g["lr"] = sch.eta_min + (base - sch.eta_min) * (1 + math.cos(math.pi * min(t, sch.T_max) / sch.T_max)) / 2
+            sch._last_lr = [g["lr"] for g in self.optimizer.param_groups]
+            log.info("the cosine learning-rate schedule, planned for %d iterations, now runs to %d: at iteration %d its "
+                     "rate is %.3g", planned, self.iterations, t, self.optimizer.param_groups[0]["lr"])
         if self.average is not None:
             if st.get("average") is not None:
                 self.average.load_state_dict(st["average"])
