@@ -17,6 +17,7 @@ import hashlib
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -53,6 +54,7 @@ class Case:
     keep: list[Path] = field(default_factory=list)  # files the case must leave as they were
     env: dict = field(default_factory=dict)
     during: Optional[Callable[[], subprocess.Popen]] = None  # a process running while the case runs
+    interrupt_after: Optional[float] = None  # Ctrl-C (SIGINT) after so many seconds
 
 
 def digest(paths: list[Path]) -> dict:
@@ -95,16 +97,25 @@ def fixtures(work: Path) -> dict:
     fx["rig_syntax"] = capture_variant("rig_syntax", text="format: nerif-capture\nversion: [1\n")
     fx["radians"] = capture_variant("radians", lambda r: r["views"].update(
         angles_deg=[float(np.deg2rad(a)) for a in r["views"]["angles_deg"]]))
+    def deepen(d: Path) -> None:
+        import cv2
+
+        for f in sorted(d.glob("distorted_*.png")):
+            cv2.imwrite(str(f), cv2.imread(str(f), cv2.IMREAD_UNCHANGED).astype(np.uint16) * 257)
+
+    fx["mixed_depth"] = capture_variant("mixed_depth")
+    deepen(fx["mixed_depth"])
     T = np.load(fx["run"] / "reconstruction.npz")["T"]
     np.save(work / "T.npy", T)
-    for name, edit in (("fl_x_negative", {"fl_x": -5618.7}), ("image_range_zero", {"image_max": -16.8897858})):
+    for name, edit in (("fl_x_negative", {"fl_x": -5618.7}), ("image_range_zero", {"image_max": -16.8897858}),
+                       ("truncated_json", "{\"fl_x\": 56"), ("frames_dict", {"frames": {"a": 1}}),
+                       ("no_file_path", {"frames": [{"transform_matrix": [[1, 0, 0, 0]] * 4}]}), ("w_wrong", {"w": 721})):
         dst = work / name
         shutil.rmtree(dst, ignore_errors=True)
         dst.mkdir()
         for split in ("train", "val", "test"):
             meta = json.loads((PHANTOM1 / f"transforms_{split}.json").read_text())
-            meta.update(edit)
-            (dst / f"transforms_{split}.json").write_text(json.dumps(meta))
+            (dst / f"transforms_{split}.json").write_text(edit if isinstance(edit, str) else json.dumps({**meta, **edit}))
             (dst / split).symlink_to(PHANTOM1 / split)
         (dst / "3Dmask.mat").symlink_to(PHANTOM1 / "3Dmask.mat")
         fx[name] = dst
@@ -195,6 +206,27 @@ def cases(work: Path, fx: dict) -> list[Case]:
                                                  out("cgls")), "refuse", "made by another run"),
         Case("resume_run_folder", nerif(*TINY, "train.iterations=25", f"train.resume={run}", out("folder")), "warn",
              "resumed from"),
+        Case("mixed_bit_depths", nerif(*cap(fx["mixed_depth"]), out("depth")), "refuse", "same bit depth"),
+        Case("no_heldout_view", nerif(*cap(fx["capture"], "data.heldout=[]"), out("noheld")), "warn", "nerif:"),
+        Case("rig_binning_for_capture", nerif(*cap(fx["capture"], "rig.binning=4"), out("rigbin")), "refuse",
+             "data.binning"),
+        Case("prior_reversed", nerif(*TINY, "field.prior=[0.05,-1.05]", out("prior")), "refuse", "field.prior"),
+        Case("phantom_colder_than_T0", nerif(*TINY, "phantom.T_peak=150", out("cold")), "refuse",
+             "colder than ambient"),
+        Case("transforms_truncated_json", nerif(*tr(fx["truncated_json"]), out("json")), "refuse",
+             "transforms_train.json is not valid JSON"),
+        Case("transforms_frames_dict", nerif(*tr(fx["frames_dict"]), out("fdict")), "refuse", "frames must be a list"),
+        Case("transforms_no_file_path", nerif(*tr(fx["no_file_path"]), out("nofp")), "refuse", "lacks file_path"),
+        Case("transforms_w_wrong", nerif(*tr(fx["w_wrong"]), out("w")), "refuse", "the json's w and h"),
+        Case("cache_in_proc", nerif(*TINY, "data.cache_dir=/proc/nerif", out("proc")), "refuse",
+             "the cache folder /proc/nerif"),
+        Case("cache_is_a_file", nerif(*TINY, f"data.cache_dir={work / 'T.npy'}", out("cfile")), "refuse",
+             "T.npy (data.cache_dir"),
+        Case("write_capture_static_series", ["nerif.write_capture", str(work / "static"), *CAPTURE, "data.frames=3"],
+             "refuse", "data.frames"),
+        Case("ctrl_c_while_rendering", nerif("device=cpu", "data.cache_dir=null", "data.render_supersample=6",
+                                             out("ctrlc")), "refuse", "interrupted before training",
+             interrupt_after=8.0),
         Case("corrupt_cache_entry", nerif(*TINY, f"data.cache_dir={fx['cache']}", "train.iterations=2", out("cache")),
              "warn", "is damaged"),
     ]
@@ -211,11 +243,16 @@ def run_case(case: Case) -> dict:
     before = digest(case.keep)
     other = case.during() if case.during else None
     t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", *case.args], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env={**os.environ, **case.env})
     try:
-        r = subprocess.run([sys.executable, "-m", *case.args], cwd=ROOT, capture_output=True, text=True,
-                           timeout=300, env={**os.environ, **case.env})
-        rc, text = r.returncode, r.stdout + r.stderr
+        if case.interrupt_after is not None:
+            time.sleep(case.interrupt_after)
+            proc.send_signal(signal.SIGINT)
+        text = proc.communicate(timeout=300)[0]
+        rc = proc.returncode
     except subprocess.TimeoutExpired:
+        proc.kill()
         rc, text = None, "timed out after 300 s"
     finally:
         if other is not None:

@@ -163,17 +163,19 @@ def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Amb
     """What a reconstruction ``sigma`` says about the prior's bounds, for ``metrics.json``: the share of the flame
     (voxels below -0.05) within 1 % of the lower bound (``warnings`` over 1 %: the flame may be hotter than
     ``data.T_max`` lets the field be), and the share of the probe box within 1 % of the upper, cold bound
-    (``warnings`` over 2 %: a flame holds no gas much colder than ambient, so a field pressed there was fitted to
-    deflections of the wrong sign, as reference and distorted images swapped give; normal runs leave none there)."""
+    (``warnings`` over 5 %: a flame holds no gas much colder than ambient, so a field pressed there was fitted to
+    data it cannot explain: deflections of the wrong sign, or a geometry that does not match the images; normal
+    runs leave none there, the multicam capture read without its lens model 2 %)."""
     a, b = prior
     flame = sigma < -0.05
     share = float((sigma[flame] <= a + 0.01 * (b - a)).mean()) if flame.any() else 0.0
     cold = float((sigma >= b - 0.01 * (b - a)).mean()) if sigma.size else 0.0
     out = {"flame_at_prior_bound": share, "box_at_cold_bound": cold}
     warn = []
-    if cold > 0.02:
+    if cold > 0.05:
         warn.append(f"{100 * cold:.0f} % of the probe box sits at the coldest value the field can hold (sigma = "
-                    f"{b:g}): the reference and distorted images look swapped (or the deflections' sign is reversed)")
+                    f"{b:g}): the data pull the field colder than ambient (deflections of the wrong sign, or a rig "
+                    "geometry or calibration that does not match the images)")
     elif share > 0.01:
         what = (f"the hottest {ambient.temperature_from_sigma(np.float64(a)):.0f} K the field can hold "
                 f"(data.T_max={ambient.T_max:g} K)" if ambient.temperature_known else f"the prior's bound sigma = {a:g}")

@@ -234,7 +234,7 @@ def test_a_flame_at_the_prior_bound_is_reported_with_the_setting_to_raise():
                                      "(data.T_max=2000 K)") and "raise data.T_max" in out["warnings"][0]
     sigma[5:8] = 0.05  # a field pressed against the cold bound (sigma <= 0.05) over 30 % of the box
     out = tr.saturation(sigma)
-    assert out["box_at_cold_bound"] == pytest.approx(0.3) and "look swapped" in out["warnings"][0]
+    assert out["box_at_cold_bound"] == pytest.approx(0.3) and "pull the field colder than ambient" in out["warnings"][0]
 
 
 def test_a_run_stops_when_its_evaluations_no_longer_improve_the_fit(tmp_path):

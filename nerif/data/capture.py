@@ -37,6 +37,24 @@ Folder layout (``rig.yaml`` format version 2; version 1, the same without ``fram
                                        # default: ambient to T_max, i.e. a flame hotter than its surroundings)
     heldout: [11]                      # optional: views never trained on (default: the last)
 
+Version 3: several calibrated cameras, each placed by hand, with its own lens (OpenCV's calibration)::
+
+    format: nerif-capture
+    version: 3
+    calibration: calibration.yml       # cv2.FileStorage file beside rig.yaml: cameras, images, background distances
+    probe: {shape: [60, 100, 60], voxel_mm: 1.0}
+    ambient: {T0: 296.15, n0: 1.00027}
+    T_max: 2000.0                      # optional, as above; so are roi_px, temperature_range_K, heldout, and
+    f_number: 32.0                     # optional: the lenses' f-number (thin rays do not use it)
+
+``calibration.yml`` holds ``n_cameras`` and per camera ``KK`` (00, 01, ...): ``camera_KK_image``,
+``camera_KK_reference`` (file names), ``camera_KK_image_size`` ([width, height] px), ``camera_KK_camera_matrix``
+(3 x 3 K, OpenCV's pixel convention), ``camera_KK_dist_coeffs`` ((k1, k2, p1, p2, k3)), ``camera_KK_rvec`` and
+``camera_KK_tvec`` (world to camera, as ``cv2.projectPoints`` takes them; mm; the world is the probe's frame:
+origin at its centre, y up), ``camera_KK_pixel_pitch_mm`` and ``camera_KK_background_distance_mm`` (camera centre
+to its background plane, along its axis). A pixel's ray leaves from its undistorted position; images, flow and
+masks stay on the distorted pixel grid.
+
 The pipeline per view: optical flow between distorted and reference image (``flow`` config), block means to
 the processing grid (``binning``), displacement -> deflection through the rig geometry, rays inside the ROI that
 cross the probe box. Everything that can be wrong with the folder is checked before the flow runs, for every
@@ -56,7 +74,7 @@ import yaml
 from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest
 from nerif.data.scene import DATASETS, Scene, ViewImages, heldout_views, scene_from_images
-from nerif.geometry import ProbeBox, arc_rig, rays_in_box
+from nerif.geometry import Camera, ProbeBox, arc_rig, rays_in_box
 from nerif.io.export import atomic_write, write_png
 from nerif.physics import Ambient
 from nerif.sensing.displacement import displacement_to_deflection
@@ -67,7 +85,7 @@ from nerif.sensing.optics import probe_distance_mm
 log = logging.getLogger(__name__)
 RIG_FILE = "rig.yaml"
 RIG_VERSION = 2
-READ_VERSIONS = (1, 2)
+READ_VERSIONS = (1, 2, 3)
 IMAGE_SUFFIXES = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
 _DEPTHS = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
 
@@ -94,6 +112,8 @@ def read_rig(root: Path) -> dict:
     if rig.get("version") not in READ_VERSIONS:
         raise ValueError(f"{path} has version {rig.get('version')}; this nerif reads versions "
                          f"{' and '.join(str(v) for v in READ_VERSIONS)}")
+    if rig["version"] == 3:
+        return read_calibrated_rig(root, rig)
     cam, views = _need(rig, "camera", str(path)), _need(rig, "views", str(path))
     for k in ("focal_mm", "pitch_um", "sensor_px", "f_number", "camera_to_centre_mm", "camera_to_background_mm"):
         _need(cam, k, f"{path} camera")
@@ -114,6 +134,88 @@ def read_rig(root: Path) -> dict:
     for k in ("roi_px", "probe", "ambient"):
         _need(rig, k, str(path))
     return rig
+
+
+def read_calibration(path: Path) -> list[dict]:
+    """Per camera of an OpenCV calibration file (:mod:`cv2.FileStorage` YAML, the keys above): ``name``, ``image``,
+    ``reference``, ``size`` (w, h), ``K`` (3, 3), ``dist`` (5,), ``rvec``, ``tvec`` (3,), ``pitch_mm``,
+    ``background_mm``; one sentence naming the camera and key for anything missing or impossible."""
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} (rig.yaml's calibration) does not exist")
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except cv2.error as e:
+        raise ValueError(f"{path} is not a calibration file cv2.FileStorage reads: {str(e).splitlines()[-1]}") from None
+    if not fs.isOpened():
+        raise ValueError(f"{path} is not a calibration file cv2.FileStorage reads")
+    n = fs.getNode("n_cameras")
+    if n.empty() or not n.real() >= 1:
+        raise ValueError(f"{path} lacks 'n_cameras' (a number of at least 1)")
+    cams = []
+    for k in range(int(n.real())):
+        pre, where = f"camera_{k:02d}_", f"{path}: camera {k:02d}"
+
+        def text(key: str) -> str:
+            v = fs.getNode(pre + key).string()
+            if not v:
+                raise ValueError(f"{where} lacks '{pre + key}' (a file name)")
+            return v
+
+        c = {"name": f"camera {k:02d}", "image": text("image"), "reference": text("reference")}
+        size = fs.getNode(pre + "image_size").mat()
+        K, dist = fs.getNode(pre + "camera_matrix").mat(), fs.getNode(pre + "dist_coeffs").mat()
+        rvec, tvec = fs.getNode(pre + "rvec").mat(), fs.getNode(pre + "tvec").mat()
+        for key, v, shape in (("image_size", size, 2), ("camera_matrix", K, 9), ("rvec", rvec, 3), ("tvec", tvec, 3)):
+            if v is None or np.asarray(v).size != shape or not np.all(np.isfinite(np.asarray(v, dtype=np.float64))):
+                raise ValueError(f"{where}: '{pre + key}' must be {shape} finite numbers")
+        dist = np.zeros(5) if dist is None else np.asarray(dist, dtype=np.float64).reshape(-1)
+        if dist.size not in (4, 5) or not np.all(np.isfinite(dist)):
+            raise ValueError(f"{where}: '{pre}dist_coeffs' must be (k1, k2, p1, p2[, k3]), finite")
+        K = np.asarray(K, dtype=np.float64).reshape(3, 3)
+        if not (K[0, 0] > 0 and K[1, 1] > 0) or abs(K[0, 1]) > 1e-9 * K[0, 0] or not np.allclose(K[2], [0, 0, 1]):
+            raise ValueError(f"{where}: '{pre}camera_matrix' must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with "
+                             "fx, fy > 0")
+        for key in ("pixel_pitch_mm", "background_distance_mm"):
+            v = fs.getNode(pre + key).real() if not fs.getNode(pre + key).empty() else float("nan")
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{where}: '{pre + key}' must be a positive length [mm]")
+            c[key] = v
+        c.update(size=tuple(int(x) for x in np.asarray(size).reshape(-1)), K=K, dist=np.pad(dist, (0, 5 - dist.size)),
+                 rvec=np.asarray(rvec, dtype=np.float64).reshape(3), tvec=np.asarray(tvec, dtype=np.float64).reshape(3))
+        cams.append(c)
+    fs.release()
+    return cams
+
+
+def calibrated_camera(c: dict, f_number: float) -> Camera:
+    """The camera of one entry of :func:`read_calibration` (full sensor): pose from ``rvec``, ``tvec``,
+    intrinsics and distortion from ``K``, ``dist``; the lens focal length follows from the image distance and the
+    background distance (thin lens, in focus on the background)."""
+    R, _ = cv2.Rodrigues(c["rvec"])  # world to camera
+    K, pitch, bg = c["K"], c["pixel_pitch_mm"], c["background_distance_mm"]
+    s_i = K[0, 0] * pitch
+    return Camera(-R.T @ c["tvec"], R.T, s_i, pitch, c["size"][0], c["size"][1], float(f_number), bg,
+                  1.0 / (1.0 / s_i + 1.0 / bg), name=c["name"], centre_px=(K[0, 2] + 0.5, K[1, 2] + 0.5),
+                  aspect=K[1, 1] / K[0, 0], distortion=tuple(float(x) for x in c["dist"]))
+
+
+def read_calibrated_rig(root: Path, rig: dict) -> dict:
+    """A version-3 rig file: its cameras from the calibration file it names, in the form of the other versions
+    (``camera.sensor_px``, ``views``) plus ``calibrated`` (the cameras)."""
+    path = root / RIG_FILE
+    cal = read_calibration(root / str(_need(rig, "calibration", str(path))))
+    sizes = {c["size"] for c in cal}
+    if len(sizes) > 1:
+        raise ValueError(f"{root / rig['calibration']}: the cameras' image sizes differ ({sorted(sizes)}); nerif needs "
+                         "one size for all")
+    w, h = next(iter(sizes))
+    cameras = [calibrated_camera(c, float(rig.get("f_number", 32.0))) for c in cal]
+    angles = [round(float(np.degrees(np.arctan2(c.position[0], c.position[2]))), 6) for c in cameras]
+    for k in ("probe", "ambient"):
+        _need(rig, k, str(path))
+    return {**rig, "camera": {"sensor_px": [w, h]}, "roi_px": rig.get("roi_px", [0, 0, w, h]),
+            "views": {"angles_deg": angles, "images": [c["image"] for c in cal],
+                      "references": [c["reference"] for c in cal]}, "calibrated": cameras}
 
 
 def rig_frames(rig: dict, path: Path = Path(RIG_FILE)) -> list[dict]:
@@ -211,6 +313,9 @@ def rig_cameras(rig: dict, binning: int = 1):
     w, h = (int(x) for x in c["sensor_px"])
     if binning < 1 or w % binning or h % binning:
         raise ValueError(f"data.binning={binning} must divide the sensor size {w} x {h} px")
+    if "calibrated" in rig:
+        full = rig["calibrated"]
+        return full, [cam.binned(binning) if binning > 1 else cam for cam in full]
     full = arc_rig(angles_deg=[float(a) for a in rig["views"]["angles_deg"]],
                    distance_mm=float(c["camera_to_centre_mm"]), focal_mm=float(c["focal_mm"]), width_px=w, height_px=h,
                    pitch_um=float(c["pitch_um"]),

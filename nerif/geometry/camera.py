@@ -1,7 +1,10 @@
 """Pinhole cameras of a BOS rig focused on the background plane, and their rays.
 
 Camera frame as in OpenCV: x right, y down (image rows), z forward. Pixel (i, j) = (column, row);
-its centre is at (i + 0.5, j + 0.5).
+its centre is at (i + 0.5, j + 0.5) (OpenCV puts it at (i, j): its principal point is ours less 0.5). A calibrated
+camera may have its principal point off the sensor centre, a focal length in rows that differs from the one in
+columns, and OpenCV's lens distortion (k1, k2, p1, p2, k3): a pixel's ray then leaves from its undistorted
+position, while images stay on the distorted pixel grid.
 """
 from __future__ import annotations
 
@@ -31,6 +34,10 @@ class Camera:
         focal_mm: lens focal length [mm].
         name: label used in messages.
         binning: how many sensor pixels one pixel of this camera spans per side (see :meth:`binned`).
+        centre_px: principal point (column, row) [px of this camera, pixel centres at +0.5]; None: the sensor
+            centre.
+        aspect: focal length in rows over that in columns (fy / fx).
+        distortion: OpenCV's (k1, k2, p1, p2, k3) of normalised image coordinates; None: none.
     """
 
     position: np.ndarray
@@ -44,6 +51,9 @@ class Camera:
     focal_mm: float
     name: str = "camera"
     binning: int = 1
+    centre_px: Optional[tuple[float, float]] = None
+    aspect: float = 1.0
+    distortion: Optional[tuple[float, float, float, float, float]] = None
 
     def __post_init__(self):
         for key in ("image_distance_mm", "pitch_mm", "f_number", "background_mm", "focal_mm"):
@@ -58,35 +68,83 @@ class Camera:
 
     @property
     def principal_point(self) -> tuple[float, float]:
-        return self.width / 2.0, self.height / 2.0
+        return (self.width / 2.0, self.height / 2.0) if self.centre_px is None else tuple(self.centre_px)
+
+    @property
+    def focal_px(self) -> tuple[float, float]:
+        """(fx, fy): the pinhole focal length in this camera's columns and rows [px]."""
+        fx = self.image_distance_mm / self.pitch_mm
+        return fx, fx * self.aspect
+
+    def camera_matrix(self) -> np.ndarray:
+        """OpenCV's 3 x 3 K of this camera (pixel centres at integer coordinates)."""
+        (fx, fy), (cx, cy) = self.focal_px, self.principal_point
+        return np.array([[fx, 0.0, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
 
     def binned(self, factor: int) -> "Camera":
         """The same optics read out with ``factor x factor`` pixel binning."""
         if factor < 1 or self.width % factor or self.height % factor:
             raise ValueError(f"binning {factor} must divide the sensor size {self.width} x {self.height} px")
+        centre = None if self.centre_px is None else (self.centre_px[0] / factor, self.centre_px[1] / factor)
         return replace(self, pitch_mm=self.pitch_mm * factor, width=self.width // factor, height=self.height // factor,
-                       binning=self.binning * factor)
+                       binning=self.binning * factor, centre_px=centre)
 
     def unbinned(self, factor: int) -> "Camera":
         """The full sensor of a camera read out with ``factor x factor`` binning (inverse of :meth:`binned`)."""
+        centre = None if self.centre_px is None else (self.centre_px[0] * factor, self.centre_px[1] * factor)
         return replace(self, pitch_mm=self.pitch_mm / factor, width=self.width * factor, height=self.height * factor,
-                       binning=max(self.binning // factor, 1))
+                       binning=max(self.binning // factor, 1), centre_px=centre)
+
+    def normalised(self, pixels: np.ndarray) -> np.ndarray:
+        """Pixel positions (N, 2) (column, row; centres at +0.5) -> undistorted normalised image coordinates (N, 2)
+        (x / z, y / z in the camera frame): OpenCV's iterative undistortion, run to 1e-14."""
+        pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+        if self.distortion is None:
+            (fx, fy), (cx, cy) = self.focal_px, self.principal_point
+            return np.stack([(pixels[:, 0] - cx) / fx, (pixels[:, 1] - cy) / fy], -1)
+        import cv2
+
+        pts = (pixels - 0.5).reshape(-1, 1, 2)
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+        out = cv2.undistortPoints(pts, self.camera_matrix(), np.asarray(self.distortion, dtype=np.float64),
+                                  R=None, P=None, criteria=criteria)
+        return out.reshape(-1, 2)
+
+    def distort(self, xy: np.ndarray) -> np.ndarray:
+        """Undistorted normalised coordinates (..., 2) -> pixel positions (..., 2) (centres at +0.5): OpenCV's
+        model, as ``cv2.projectPoints`` applies it."""
+        x, y = xy[..., 0], xy[..., 1]
+        if self.distortion is not None:
+            k1, k2, p1, p2, k3 = self.distortion
+            r2 = x * x + y * y
+            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            x, y = (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+                    y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
+        (fx, fy), (cx, cy) = self.focal_px, self.principal_point
+        return np.stack([fx * x + cx, fy * y + cy], -1)
 
     def pixel_directions(self, dtype=torch.float64) -> torch.Tensor:
         """Unit ray directions through every pixel centre, (height * width, 3), row-major (row j, column i)."""
-        j, i = torch.meshgrid(torch.arange(self.height, dtype=dtype), torch.arange(self.width, dtype=dtype), indexing="ij")
-        cx, cy = self.principal_point
-        k = self.pitch_mm / self.image_distance_mm
-        d_cam = torch.stack([(i + 0.5 - cx) * k, (j + 0.5 - cy) * k, torch.ones_like(i)], -1).reshape(-1, 3)
-        d = d_cam @ torch.as_tensor(self.rotation, dtype=dtype).T
+        if self.distortion is None:
+            j, i = torch.meshgrid(torch.arange(self.height, dtype=dtype), torch.arange(self.width, dtype=dtype),
+                                  indexing="ij")
+            cx, cy = self.principal_point
+            k = self.pitch_mm / self.image_distance_mm
+            d_cam = torch.stack([(i + 0.5 - cx) * k, (j + 0.5 - cy) * (k / self.aspect), torch.ones_like(i)],
+                                -1).reshape(-1, 3)
+            d = d_cam @ torch.as_tensor(self.rotation, dtype=dtype).T
+            return d / d.norm(dim=-1, keepdim=True)
+        j, i = np.meshgrid(np.arange(self.height, dtype=np.float64), np.arange(self.width, dtype=np.float64),
+                           indexing="ij")
+        xy = self.normalised(np.stack([i.reshape(-1) + 0.5, j.reshape(-1) + 0.5], -1))
+        d_cam = np.concatenate([xy, np.ones((len(xy), 1))], -1)
+        d = torch.as_tensor(d_cam @ np.asarray(self.rotation, dtype=np.float64).T, dtype=dtype)
         return d / d.norm(dim=-1, keepdim=True)
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """World points (..., 3) [mm] -> pixel coordinates (..., 2) as (column, row), continuous."""
         pc = (np.asarray(points) - self.position) @ self.rotation
-        cx, cy = self.principal_point
-        k = self.image_distance_mm / self.pitch_mm
-        return np.stack([pc[..., 0] / pc[..., 2] * k + cx, pc[..., 1] / pc[..., 2] * k + cy], -1)
+        return self.distort(pc[..., :2] / pc[..., 2:3])
 
     def pixels_per_mm(self, point) -> float:
         """The image scale at a world point (3,) [mm]: pixels per mm of a length across the line of sight there."""

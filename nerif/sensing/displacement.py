@@ -4,8 +4,11 @@ A ray with direction ``d`` is deflected by ``eps`` (rad, world frame, ``eps . d 
 through a bounded field) at the probe centre. It reaches the background plane (normal ``f``, the camera axis,
 ``Z_D`` behind the probe centre) shifted by ``Delta = L (eps - d (f . eps) / (f . d))`` with ``L = Z_D / (f . d)``;
 the camera sees that shift as ``u = s_i / (Z_B p) (r . Delta, w . Delta)`` pixels (column, row), with ``r, w``
-its right and down axes, ``s_i`` the image distance, ``p`` the pixel pitch. The image at pixel ``x`` shows the
-background at ``x + u``. Both maps are linear; the inverse uses ``eps . d = 0`` as the third equation.
+its right and down axes, ``s_i`` the image distance, ``p`` the pixel pitch (rows scaled by ``fy / fx`` where a
+calibration gives them their own focal length). The image at pixel ``x`` shows the background at ``x + u``. Both
+maps are linear; the inverse uses ``eps . d = 0`` as the third equation. A lens's distortion changes the local
+scale of its image by ``1 + 3 k1 r^2`` at normalised radius ``r``: under 1.5 % at the corners of the lenses
+calibrated so far, below the optical flow's error, so displacements are taken as on the undistorted grid.
 """
 from __future__ import annotations
 
@@ -23,6 +26,8 @@ def displacement_matrix(dirs: torch.Tensor, camera: Camera) -> torch.Tensor:
     L = (camera.background_mm - probe_distance_mm(camera)) / fd
     k = camera.image_distance_mm / (camera.background_mm * camera.pitch_mm)
     rows = [axis[None, :] - (dirs @ axis)[:, None] * f[None, :] / fd[:, None] for axis in (right, down)]
+    if camera.aspect != 1.0:  # a calibrated camera: rows have their own focal length
+        rows[1] = rows[1] * camera.aspect
     return (k * L)[:, None, None] * torch.stack(rows, 1)
 
 

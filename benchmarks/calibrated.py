@@ -1,0 +1,105 @@
+"""A calibrated multi-camera rig with real lenses against the same flame on an ideal arc (issue 29).
+
+    python benchmarks/calibrated.py                  # 3 runs, about 10 minutes on 2 cores
+    python benchmarks/calibrated.py --set train.iterations=600
+
+Rows, each scored against the flame's ``volume.npz``:
+- ``../shared/data/independent_capture_bunsen_multicam`` with its OpenCV calibration as given (10 cameras placed
+  by hand, principal points off centre, lens distortion), read through a version-3 ``rig.yaml`` (camera 9 held
+  out);
+- the same images read as if the rig were ideal: distortion zero, principal points at the sensor centres (what
+  the lens model is worth);
+- ``../shared/data/independent_capture_bunsen``: the same flame on an ideal arc of 9 cameras (the reference of
+  the issue's target: at most 1.2x its sigma error with the calibration as given).
+Both multicam folders are made under ``--out`` (links to the images, the rig file, the calibration). Writes
+``calibrated.json`` and ``calibrated.md``.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from ablation import header, run_arguments, run_named, write_report  # noqa: E402
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+MULTICAM, ARC = DATA / "independent_capture_bunsen_multicam", DATA / "independent_capture_bunsen"
+RIG = {"format": "nerif-capture", "version": 3, "calibration": "calibration.yml",
+       "probe": {"shape": [60, 100, 60], "voxel_mm": 1.0}, "ambient": {"T0": 296.15, "n0": 1.00027}, "T_max": 2000.0,
+       "heldout": [9]}
+
+
+def write_ideal(src: Path, dst: Path) -> None:
+    """``src`` (a cv2.FileStorage calibration) with every distortion zero and every principal point at its
+    sensor's centre."""
+    fs = cv2.FileStorage(str(src), cv2.FILE_STORAGE_READ)
+    out = cv2.FileStorage(str(dst), cv2.FILE_STORAGE_WRITE)
+    n = int(fs.getNode("n_cameras").real())
+    out.write("n_cameras", n)
+    for k in range(n):
+        pre = f"camera_{k:02d}_"
+        for key in ("image", "reference"):
+            out.write(pre + key, fs.getNode(pre + key).string())
+        size = fs.getNode(pre + "image_size").mat()
+        K = fs.getNode(pre + "camera_matrix").mat().copy()
+        w, h = np.asarray(size).reshape(-1)
+        K[0, 2], K[1, 2] = w / 2 - 0.5, h / 2 - 0.5  # OpenCV's pixel centres at integers
+        out.write(pre + "image_size", size)
+        out.write(pre + "camera_matrix", K)
+        out.write(pre + "dist_coeffs", np.zeros((1, 5)))
+        for key in ("rvec", "tvec"):
+            out.write(pre + key, fs.getNode(pre + key).mat())
+        for key in ("pixel_pitch_mm", "background_distance_mm"):
+            out.write(pre + key, fs.getNode(pre + key).real())
+    out.release()
+    fs.release()
+
+
+def multicam_folder(root: Path, ideal: bool) -> Path:
+    """The multicam capture as a version-3 capture folder under ``root``."""
+    root.mkdir(parents=True, exist_ok=True)
+    for f in MULTICAM.glob("*.png"):
+        if not (root / f.name).exists():
+            (root / f.name).symlink_to(f)
+    cal = root / "calibration.yml"
+    if ideal:
+        write_ideal(MULTICAM / "calibration.yml", cal)
+    elif not cal.exists():
+        cal.symlink_to(MULTICAM / "calibration.yml")
+    (root / "rig.yaml").write_text(yaml.safe_dump(RIG))
+    return root
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    run_arguments(ap, "benchmarks/results/calibrated")
+    args = ap.parse_args(argv)
+    out = Path(args.out).resolve()
+    truth = MULTICAM / "volume.npz"
+    given, ideal = multicam_folder(out / "multicam", False), multicam_folder(out / "multicam_ideal", True)
+    runs = {"multicam, calibration as given": f"data=capture data.root={given} data.binning=4 data.truth={truth}",
+            "multicam, read as an ideal rig": f"data=capture data.root={ideal} data.binning=4 data.truth={truth}",
+            "arc (independent_capture_bunsen)": f"data=capture data.root={ARC} data.binning=4 "
+                                                f"data.truth={ARC / 'volume.npz'}"}
+    rows = run_named(runs, args)
+    lines = [f"Calibrated rig against the ideal arc, {header(args.set, list(rows.values()))}", "",
+             "| data | sigma rel. error | T RMSE [K] | held-out displacement RMSE [px] | wall time [s] |",
+             "|---|---|---|---|---|"]
+    for name, r in rows.items():
+        lines.append(f"| {name} | {r['sigma_relative_error']:.4f} | {r['temperature_rmse_K']:.1f} | "
+                     f"{r.get('heldout_displacement_rmse_px', float('nan')):.4f} | {r['wall_time_s']:.0f} |")
+    ratio = rows["multicam, calibration as given"]["sigma_relative_error"] / \
+        rows["arc (independent_capture_bunsen)"]["sigma_relative_error"]
+    lines += ["", f"- calibration as given / arc: {ratio:.3f} against at most 1.2: {'met' if ratio <= 1.2 else 'MISSED'}"]
+    write_report(out, "calibrated", {"settings": args.set, "rows": rows}, "\n".join(lines) + "\n")
+    return rows
+
+
+if __name__ == "__main__":
+    main()

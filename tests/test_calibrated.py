@@ -1,0 +1,79 @@
+"""Calibrated cameras (issue 29): OpenCV's intrinsics, distortion and pose, read from a version-3 capture."""
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from nerif.data.capture import RIG_FILE, read_rig, rig_cameras
+from nerif.geometry import ProbeBox, rays_in_box
+
+SHARED = Path(os.environ.get("NERIF_SHARED", Path(__file__).resolve().parents[2] / "shared")) / "data"
+MULTICAM = SHARED / "independent_capture_bunsen_multicam"
+RIG = {"format": "nerif-capture", "version": 3, "calibration": "calibration.yml",
+       "probe": {"shape": [60, 100, 60], "voxel_mm": 1.0}, "ambient": {"T0": 296.15, "n0": 1.00027}, "T_max": 2000.0,
+       "heldout": [9]}
+
+
+def folder(tmp_path: Path, edit=None) -> Path:
+    """The multicam capture with the issue's version-3 rig.yaml beside its files (calibration edited by ``edit``)."""
+    for f in MULTICAM.iterdir():
+        if f.suffix == ".png" or (f.name == "calibration.yml" and edit is None):
+            (tmp_path / f.name).symlink_to(f)
+    if edit is not None:
+        text = (MULTICAM / "calibration.yml").read_text()
+        (tmp_path / "calibration.yml").write_text(edit(text))
+    (tmp_path / RIG_FILE).write_text(yaml.safe_dump(RIG))
+    return tmp_path
+
+
+def test_a_pixels_ray_is_opencvs_and_projects_back_onto_the_pixel(tmp_path):
+    fs = cv2.FileStorage(str(MULTICAM / "calibration.yml"), cv2.FILE_STORAGE_READ)
+    full, _ = rig_cameras(read_rig(folder(tmp_path)), 1)
+    rng = np.random.default_rng(0)
+    for k, cam in enumerate(full):
+        K, dist = fs.getNode(f"camera_{k:02d}_camera_matrix").mat(), fs.getNode(f"camera_{k:02d}_dist_coeffs").mat()
+        rvec, tvec = fs.getNode(f"camera_{k:02d}_rvec").mat(), fs.getNode(f"camera_{k:02d}_tvec").mat()
+        px = rng.uniform([0, 0], [cam.width, cam.height], (500, 2))  # ours: pixel centres at +0.5
+        xy = cam.normalised(px)
+        ocv = cv2.undistortPoints((px - 0.5).reshape(-1, 1, 2), K, dist).reshape(-1, 2)  # 5 iterations
+        assert np.abs(xy - ocv).max() < 1e-5  # OpenCV's default stops short of our 1e-14
+        world = cam.position + 700.0 * (np.concatenate([xy, np.ones((500, 1))], 1) @ cam.rotation.T)
+        back = cv2.projectPoints(world, rvec, tvec, K, dist)[0].reshape(-1, 2) + 0.5
+        assert np.abs(back - px).max() < 1e-6
+        np.testing.assert_allclose(cam.project(world), back, atol=1e-9)  # our projection is OpenCV's
+        # the ray through every pixel centre of the binned camera is the full sensor's ray through that point
+        d = cam.binned(4).pixel_directions()
+        centre = np.array([[4 * 10 + 2.0, 4 * 20 + 2.0]])  # pixel (10, 20) of the binned grid, on the full sensor
+        ray = np.concatenate([cam.normalised(centre), [[1.0]]], 1) @ cam.rotation.T
+        np.testing.assert_allclose(d[20 * (cam.width // 4) + 10].numpy(),
+                                   ray[0] / np.linalg.norm(ray), atol=1e-12)
+
+
+def test_the_rig_is_the_calibrations_and_sees_the_probe(tmp_path):
+    rig = read_rig(folder(tmp_path))
+    full, cams = rig_cameras(rig, 4)
+    assert len(full) == 10 and rig["views"]["images"][3] == "distorted_03.png"
+    assert rig["roi_px"] == [0, 0, 360, 640]
+    for cam in full:  # 740-900 mm from the axis, within 35 mm of the probe's height, looking at its centre
+        assert 740 - 1 < np.hypot(cam.position[0], cam.position[2]) < 900 + 1 and abs(cam.position[1]) < 36
+        axis = cam.rotation[:, 2]
+        miss = np.linalg.norm(np.cross(-cam.position, axis))  # distance of the centre from the optical axis
+        assert miss < 10.0
+    origins, dirs, pixel, starts = rays_in_box(ProbeBox((60, 100, 60), 1.0), cams)
+    assert len(starts) == 11 and len(dirs) > 10 * 0.3 * 90 * 160
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda t: t.replace("camera_03_rvec", "camera_03_rvex"), "camera 03 lacks|camera 03: 'camera_03_rvec'"),
+    (lambda t: t.replace("camera_02_pixel_pitch_mm: 0.04", "camera_02_pixel_pitch_mm: -0.04"),
+     "camera 02: 'camera_02_pixel_pitch_mm' must be a positive length"),
+    (lambda t: t.replace("camera_05_background_distance_mm: ", "camera_05_background_distance_mm: 100 #"),
+     "camera 05: its background, 100 mm away, is not behind the probe box"),
+])
+def test_a_bad_calibration_is_one_sentence_naming_the_camera_and_key(tmp_path, edit, message):
+    with pytest.raises(ValueError, match=message):
+        rig = read_rig(folder(tmp_path, edit))
+        rays_in_box(ProbeBox((60, 100, 60), 1.0), rig_cameras(rig, 4)[1])
