@@ -299,7 +299,7 @@ def test_a_warm_start_begins_near_the_volume_it_is_given(tmp_path):
     with pytest.raises(ValueError, match="shape .* but the probe grid is"):
         neural_solver(f"train.init_volume={tmp_path / 'wrong.npz'}")
     np.save(tmp_path / "T.npy", cold.scene.truth_T)  # issue 28: a temperature file was fitted as sigma
-    with pytest.raises(ValueError, match=r"T.npy holds values 296.1 to .* \(a temperature in kelvin\?\), far outside"):
+    with pytest.raises(ValueError, match=r"T.npy holds values 296.2 to .* \(a temperature in kelvin\?\), far outside"):
         neural_solver(f"train.init_volume={tmp_path / 'T.npy'}")
 
 

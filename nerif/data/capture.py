@@ -52,8 +52,17 @@ Version 3: several calibrated cameras, each placed by hand, with its own lens (O
 (3 x 3 K, OpenCV's pixel convention), ``camera_KK_dist_coeffs`` ((k1, k2, p1, p2, k3)), ``camera_KK_rvec`` and
 ``camera_KK_tvec`` (world to camera, as ``cv2.projectPoints`` takes them; mm; the world is the probe's frame:
 origin at its centre, y up), ``camera_KK_pixel_pitch_mm`` and ``camera_KK_background_distance_mm`` (camera centre
-to its background plane, along its axis). A pixel's ray leaves from its undistorted position; images, flow and
-masks stay on the distorted pixel grid.
+to its background plane, along its axis). Instead of ``calibration``, a ``cameras`` list in ``rig.yaml`` holds the
+same per camera (without the ``camera_KK_`` prefix)::
+
+    cameras:
+      - {image: distorted_00.png, reference: reference_00.png, image_size: [360, 640],
+         camera_matrix: [[2814.2, 0, 168.5], [0, 2818.1, 329.5], [0, 0, 1]], dist_coeffs: [-0.07, 0.14, 0, 0, 0],
+         rvec: [-3.096, -0.045, 0.085], tvec: [-1.57, -3.50, 835.1], pixel_pitch_mm: 0.04,
+         background_distance_mm: 1519.9}
+      - ...
+
+A pixel's ray leaves from its undistorted position; images, flow and masks stay on the distorted pixel grid.
 
 The pipeline per view: optical flow between distorted and reference image (``flow`` config), block means to
 the processing grid (``binning``), displacement -> deflection through the rig geometry, rays inside the ROI that
@@ -136,10 +145,52 @@ def read_rig(root: Path) -> dict:
     return rig
 
 
+CALIBRATION_KEYS = ("image", "reference", "image_size", "camera_matrix", "dist_coeffs", "rvec", "tvec",
+                    "pixel_pitch_mm", "background_distance_mm")
+
+
+def calibration_entry(values: dict, name: str, where: str) -> dict:
+    """One camera of a calibration (``values``: :data:`CALIBRATION_KEYS` -> value, None where absent), checked:
+    ``name``, ``image``, ``reference``, ``size`` (w, h), ``K`` (3, 3), ``dist`` (5,), ``rvec``, ``tvec`` (3,),
+    ``pitch_mm``, ``background_mm``; one sentence naming ``where`` (the camera) and the key otherwise."""
+    def numbers(key: str, n: int) -> np.ndarray:
+        v = values.get(key)
+        try:
+            a = np.asarray(v, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            a = np.zeros(0)
+        if v is None or a.size != n or not np.all(np.isfinite(a)):
+            raise ValueError(f"{where}: '{key}' must be {n} finite numbers")
+        return a
+
+    c = {"name": name}
+    for key in ("image", "reference"):
+        if not isinstance(values.get(key), str) or not values[key]:
+            raise ValueError(f"{where} lacks '{key}' (a file name)")
+        c[key] = values[key]
+    K = numbers("camera_matrix", 9).reshape(3, 3)
+    if not (K[0, 0] > 0 and K[1, 1] > 0) or abs(K[0, 1]) > 1e-9 * K[0, 0] or not np.allclose(K[2], [0, 0, 1]):
+        raise ValueError(f"{where}: 'camera_matrix' must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+    try:
+        dist = np.asarray(values["dist_coeffs"] if values.get("dist_coeffs") is not None else np.zeros(5),
+                          dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        dist = np.zeros(0)
+    if dist.size not in (4, 5) or not np.all(np.isfinite(dist)):
+        raise ValueError(f"{where}: 'dist_coeffs' must be (k1, k2, p1, p2[, k3]), finite")
+    for key in ("pixel_pitch_mm", "background_distance_mm"):
+        v = values.get(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (np.isfinite(v) and v > 0):
+            raise ValueError(f"{where}: '{key}' must be a positive length [mm]")
+        c[key] = float(v)
+    c.update(size=tuple(int(x) for x in numbers("image_size", 2)), K=K, dist=np.pad(dist, (0, 5 - dist.size)),
+             rvec=numbers("rvec", 3), tvec=numbers("tvec", 3))
+    return c
+
+
 def read_calibration(path: Path) -> list[dict]:
-    """Per camera of an OpenCV calibration file (:mod:`cv2.FileStorage` YAML, the keys above): ``name``, ``image``,
-    ``reference``, ``size`` (w, h), ``K`` (3, 3), ``dist`` (5,), ``rvec``, ``tvec`` (3,), ``pitch_mm``,
-    ``background_mm``; one sentence naming the camera and key for anything missing or impossible."""
+    """Every camera of an OpenCV calibration file (:mod:`cv2.FileStorage` YAML, keys ``camera_KK_<key>`` of
+    :data:`CALIBRATION_KEYS` and ``n_cameras``), as :func:`calibration_entry` gives them."""
     if not path.is_file():
         raise FileNotFoundError(f"{path} (rig.yaml's calibration) does not exist")
     try:
@@ -151,38 +202,21 @@ def read_calibration(path: Path) -> list[dict]:
     n = fs.getNode("n_cameras")
     if n.empty() or not n.real() >= 1:
         raise ValueError(f"{path} lacks 'n_cameras' (a number of at least 1)")
+
+    def value(node):
+        if node.empty():
+            return None
+        if node.isString():
+            return node.string()
+        if node.isReal() or node.isInt():
+            return node.real()
+        return node.mat()
+
     cams = []
     for k in range(int(n.real())):
-        pre, where = f"camera_{k:02d}_", f"{path}: camera {k:02d}"
-
-        def text(key: str) -> str:
-            v = fs.getNode(pre + key).string()
-            if not v:
-                raise ValueError(f"{where} lacks '{pre + key}' (a file name)")
-            return v
-
-        c = {"name": f"camera {k:02d}", "image": text("image"), "reference": text("reference")}
-        size = fs.getNode(pre + "image_size").mat()
-        K, dist = fs.getNode(pre + "camera_matrix").mat(), fs.getNode(pre + "dist_coeffs").mat()
-        rvec, tvec = fs.getNode(pre + "rvec").mat(), fs.getNode(pre + "tvec").mat()
-        for key, v, shape in (("image_size", size, 2), ("camera_matrix", K, 9), ("rvec", rvec, 3), ("tvec", tvec, 3)):
-            if v is None or np.asarray(v).size != shape or not np.all(np.isfinite(np.asarray(v, dtype=np.float64))):
-                raise ValueError(f"{where}: '{pre + key}' must be {shape} finite numbers")
-        dist = np.zeros(5) if dist is None else np.asarray(dist, dtype=np.float64).reshape(-1)
-        if dist.size not in (4, 5) or not np.all(np.isfinite(dist)):
-            raise ValueError(f"{where}: '{pre}dist_coeffs' must be (k1, k2, p1, p2[, k3]), finite")
-        K = np.asarray(K, dtype=np.float64).reshape(3, 3)
-        if not (K[0, 0] > 0 and K[1, 1] > 0) or abs(K[0, 1]) > 1e-9 * K[0, 0] or not np.allclose(K[2], [0, 0, 1]):
-            raise ValueError(f"{where}: '{pre}camera_matrix' must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with "
-                             "fx, fy > 0")
-        for key in ("pixel_pitch_mm", "background_distance_mm"):
-            v = fs.getNode(pre + key).real() if not fs.getNode(pre + key).empty() else float("nan")
-            if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"{where}: '{pre + key}' must be a positive length [mm]")
-            c[key] = v
-        c.update(size=tuple(int(x) for x in np.asarray(size).reshape(-1)), K=K, dist=np.pad(dist, (0, 5 - dist.size)),
-                 rvec=np.asarray(rvec, dtype=np.float64).reshape(3), tvec=np.asarray(tvec, dtype=np.float64).reshape(3))
-        cams.append(c)
+        pre = f"camera_{k:02d}_"
+        values = {key: value(fs.getNode(pre + key)) for key in CALIBRATION_KEYS}
+        cams.append(calibration_entry(values, f"camera {k:02d}", f"{path}: camera {k:02d} ({pre}<key>)"))
     fs.release()
     return cams
 
@@ -203,13 +237,24 @@ def read_calibrated_rig(root: Path, rig: dict) -> dict:
     """A version-3 rig file: its cameras from the calibration file it names, in the form of the other versions
     (``camera.sensor_px``, ``views``) plus ``calibrated`` (the cameras)."""
     path = root / RIG_FILE
-    cal = read_calibration(root / str(_need(rig, "calibration", str(path))))
+    if ("calibration" in rig) == ("cameras" in rig):
+        raise ValueError(f"{path}: version 3 needs either 'calibration' (an OpenCV calibration file) or a 'cameras' "
+                         f"list, {'not both' if 'cameras' in rig else 'one of them'}")
+    if "cameras" in rig:
+        if not isinstance(rig["cameras"], list) or not rig["cameras"]:
+            raise ValueError(f"{path}: 'cameras' must be a list with one entry per camera")
+        cal = [calibration_entry(c if isinstance(c, dict) else {}, f"camera {k:02d}", f"{path}: cameras[{k}]")
+               for k, c in enumerate(rig["cameras"])]
+    else:
+        cal = read_calibration(root / str(rig["calibration"]))
     sizes = {c["size"] for c in cal}
     if len(sizes) > 1:
-        raise ValueError(f"{root / rig['calibration']}: the cameras' image sizes differ ({sorted(sizes)}); nerif needs "
+        raise ValueError(f"{path}: the cameras' image sizes differ ({sorted(sizes)}); nerif needs "
                          "one size for all")
     w, h = next(iter(sizes))
     cameras = [calibrated_camera(c, float(rig.get("f_number", 32.0))) for c in cal]
+    if len({c["name"] for c in cal}) != len(cal):
+        raise ValueError(f"{path}: two cameras share a name")
     angles = [round(float(np.degrees(np.arctan2(c.position[0], c.position[2]))), 6) for c in cameras]
     for k in ("probe", "ambient"):
         _need(rig, k, str(path))
@@ -449,6 +494,10 @@ def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Opt
     if first is None or (series and len(listed) != len(times)) or (not series and len(listed) != 1):
         raise ValueError(f"{len(listed)} scene(s) for {len(times) if series else 1} frame(s)")
     n, H, W = first.sensing["distorted"].shape
+    if any(c.distortion is not None or c.centre_px is not None or c.aspect != 1.0 for c in first.cameras):
+        if series:
+            raise ValueError("a time series through a calibrated rig is not written yet: write one state at a time")
+        return write_calibrated(first, root, listed[0], heldout)
     cam = first.cameras[0].unbinned(first.cameras[0].binning)  # the full sensor
     angles = [round(float(np.degrees(np.arctan2(c.position[0], c.position[2]))), 6) for c in first.cameras]
     views = {"angles_deg": angles, "references": [f"reference_{v:02d}.png" for v in range(n)]}
@@ -468,5 +517,50 @@ def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Opt
                 "heldout": list(heldout) if heldout is not None else [n - 1]})
     atomic_write(root / RIG_FILE, lambda t: Path(t).write_text(
         "# nerif capture rig file (format: nerif/data/capture.py); written from a synthetic scene\n"
+        + yaml.safe_dump(rig, sort_keys=False, default_flow_style=None)))
+    return root
+
+
+def write_calibration(cameras: list[Camera], images: list[str], references: list[str], path: Path) -> Path:
+    """An OpenCV calibration file (:mod:`cv2.FileStorage` YAML, the keys :func:`read_calibration` reads) of
+    ``cameras`` (each on the grid of its images), written atomically."""
+    def write(tmp: str) -> None:
+        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML)
+        fs.write("n_cameras", len(cameras))
+        fs.write("units", "mm")
+        fs.write("world", "probe centre, y up; x, z horizontal")
+        for k, (cam, image, ref) in enumerate(zip(cameras, images, references)):
+            pre = f"camera_{k:02d}_"
+            R = np.asarray(cam.rotation, dtype=np.float64).T  # world to camera
+            fs.write(pre + "image", image)
+            fs.write(pre + "reference", ref)
+            fs.write(pre + "image_size", np.array([cam.width, cam.height], dtype=np.int32))
+            fs.write(pre + "camera_matrix", cam.camera_matrix())
+            fs.write(pre + "dist_coeffs", np.asarray(cam.distortion or (0.0,) * 5, dtype=np.float64)[None])
+            fs.write(pre + "rvec", cv2.Rodrigues(R)[0])
+            fs.write(pre + "tvec", (-R @ np.asarray(cam.position, dtype=np.float64))[:, None])
+            fs.write(pre + "pixel_pitch_mm", float(cam.pitch_mm))
+            fs.write(pre + "background_distance_mm", float(cam.background_mm))
+        fs.release()
+
+    return atomic_write(path, write)
+
+
+def write_calibrated(scene: Scene, root: Path, images: list[str], heldout: Optional[list] = None) -> Path:
+    """The rig file of version 3 and its calibration file, for a scene of calibrated cameras whose images are
+    written (:func:`write_capture`)."""
+    n, H, W = scene.sensing["distorted"].shape
+    cams = [c.unbinned(c.binning) for c in scene.cameras]
+    cams = [c.binned(c.width // W) if c.width != W else c for c in cams]  # the images' grid
+    refs = [f"reference_{v:02d}.png" for v in range(n)]
+    write_calibration(cams, images, refs, root / "calibration.yml")
+    rig = {"format": "nerif-capture", "version": 3, "calibration": "calibration.yml",
+           "probe": {"shape": [int(s) for s in scene.box.shape], "voxel_mm": float(scene.box.voxel_mm)},
+           "ambient": {"T0": float(scene.ambient.T0), "n0": float(scene.ambient.n0)},
+           "T_max": float(scene.ambient.T_max), "f_number": float(cams[0].f_number),
+           "temperature_range_K": [float(scene.ambient.T0), float(scene.ambient.T_max)],
+           "heldout": list(heldout) if heldout is not None else [n - 1]}
+    atomic_write(root / RIG_FILE, lambda t: Path(t).write_text(
+        "# nerif capture rig file, version 3 (format: nerif/data/capture.py); written from a synthetic scene\n"
         + yaml.safe_dump(rig, sort_keys=False, default_flow_style=None)))
     return root

@@ -245,3 +245,49 @@ def arc_rig(
                      f_number, background_mm, focal_mm, name=f"camera {k} ({np.rad2deg(th):.1f} deg)")
         cams.append(cam.binned(binning) if binning > 1 else cam)
     return cams
+
+
+def look_at(position: np.ndarray, target: np.ndarray, roll_deg: float = 0.0) -> np.ndarray:
+    """Camera-to-world rotation of a camera at ``position`` looking at ``target``, image rows along -y, turned
+    by ``roll_deg`` about its axis."""
+    R = look_at_origin(np.asarray(position, dtype=np.float64) - np.asarray(target, dtype=np.float64))
+    c, s = np.cos(np.deg2rad(roll_deg)), np.sin(np.deg2rad(roll_deg))
+    right, down = R[:, 0] * c + R[:, 1] * s, -R[:, 0] * s + R[:, 1] * c
+    return np.stack([right, down, R[:, 2]], axis=1)
+
+
+@RIGS.register("calibrated")
+def calibrated_rig(n_cameras: int = 10, span_deg: float = 160.0, azimuth_jitter_deg: float = 4.0,
+                   distance_mm: tuple = (740.0, 900.0), height_mm: float = 35.0, aim_mm: float = 3.0,
+                   roll_deg: float = 2.0, background_behind_mm: tuple = (600.0, 900.0), focal_mm: float = 105.0,
+                   width_px: int = 360, height_px: int = 640, pitch_um: float = 40.0, f_number: float = 32.0,
+                   principal_offset_px: float = 12.0, k1: tuple = (-0.25, 0.1), k2: tuple = (-0.5, 0.5),
+                   tangential: float = 1e-3, binning: int = 4, seed: int = 0) -> list[Camera]:
+    """Cameras placed by hand around the burner, as a real tomographic BOS rig is, each with its own lens (seeded):
+    camera k near azimuth ``k span / (n - 1)`` (jittered by up to ``azimuth_jitter_deg``), at a distance within
+    ``distance_mm`` of the axis and a height within ``height_mm`` of the probe centre, aimed at a point within
+    ``aim_mm`` of it, rolled by up to ``roll_deg``, with its own background ``background_behind_mm`` behind the
+    centre (focused on it), its principal point up to ``principal_offset_px`` (full-sensor px) off the sensor
+    centre and OpenCV's distortion: k1, k2 within their intervals, p1, p2 within +-``tangential``, k3 = 0."""
+    if not (isinstance(n_cameras, int) and n_cameras >= 1):
+        raise ValueError(f"rig.n_cameras={n_cameras}: a whole number of at least 1")
+    arc_rig(n_cameras=1, distance_mm=float(min(distance_mm)), focal_mm=focal_mm, pitch_um=pitch_um,
+            background_behind_mm=float(min(background_behind_mm)), f_number=f_number, binning=binning,
+            width_px=width_px, height_px=height_px)  # the settings' checks, one sentence each
+    rng = np.random.default_rng(seed)
+    u = lambda lo, hi: float(rng.uniform(lo, hi))  # noqa: E731
+    cams = []
+    for k in range(n_cameras):
+        theta = np.deg2rad(k * span_deg / max(n_cameras - 1, 1) + u(-azimuth_jitter_deg, azimuth_jitter_deg))
+        d = u(*distance_mm)
+        pos = np.array([d * np.sin(theta), u(-height_mm, height_mm), d * np.cos(theta)])
+        R = look_at(pos, rng.uniform(-aim_mm, aim_mm, 3), u(-roll_deg, roll_deg))
+        background = float(-pos @ R[:, 2]) + u(*background_behind_mm)
+        s_i = 1.0 / (1.0 / focal_mm - 1.0 / background)
+        centre = (width_px / 2 + u(-principal_offset_px, principal_offset_px),
+                  height_px / 2 + u(-principal_offset_px, principal_offset_px))
+        dist = (u(*k1), u(*k2), u(-tangential, tangential), u(-tangential, tangential), 0.0)
+        cam = Camera(pos, R, s_i, pitch_um * 1e-3, width_px, height_px, f_number, background, focal_mm,
+                     name=f"camera {k:02d} ({np.rad2deg(theta):.1f} deg)", centre_px=centre, distortion=dist)
+        cams.append(cam.binned(binning) if binning > 1 else cam)
+    return cams
