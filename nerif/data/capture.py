@@ -120,7 +120,7 @@ def read_rig(root: Path) -> dict:
         raise ValueError(f"{path} is not a nerif capture rig file (it needs 'format: nerif-capture')")
     if rig.get("version") not in READ_VERSIONS:
         raise ValueError(f"{path} has version {rig.get('version')}; this nerif reads versions "
-                         f"{' and '.join(str(v) for v in READ_VERSIONS)}")
+                         f"{', '.join(str(v) for v in READ_VERSIONS[:-1])} and {READ_VERSIONS[-1]}")
     if rig["version"] == 3:
         return read_calibrated_rig(root, rig)
     cam, views = _need(rig, "camera", str(path)), _need(rig, "views", str(path))
@@ -130,6 +130,9 @@ def read_rig(root: Path) -> dict:
         v = cam[k]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (np.isfinite(v) and v > 0):
             raise ValueError(f"{path}: camera.{k} = {v!r} must be a positive number")
+    if cam["pitch_um"] < 0.5:  # no camera has pixels under half a micrometre: a pitch in millimetres
+        raise ValueError(f"{path}: camera.pitch_um = {cam['pitch_um']} is in micrometres (a pitch of "
+                         f"{cam['pitch_um']} mm is {cam['pitch_um'] * 1e3:g})")
     if not cam["camera_to_background_mm"] > cam["camera_to_centre_mm"]:
         raise ValueError(f"{path}: camera.camera_to_background_mm = {cam['camera_to_background_mm']} must exceed "
                          f"camera.camera_to_centre_mm = {cam['camera_to_centre_mm']} (the background lies behind the "
