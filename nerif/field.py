@@ -159,13 +159,15 @@ def check_truth_within(truth_T: Optional[np.ndarray], ambient: Ambient, prior: t
                          f"{prior[0]:g}): set data.T_max={np.ceil(hottest / 50) * 50:.0f} or higher")
 
 
-def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Ambient) -> dict:
+def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Ambient,
+                     truth_T: Optional[np.ndarray] = None) -> dict:
     """What a reconstruction ``sigma`` says about the prior's bounds, for ``metrics.json``: the share of the flame
     (voxels below -0.05) within 1 % of the lower bound (``warnings`` over 1 %: the flame may be hotter than
     ``data.T_max`` lets the field be), and the share of the probe box within 1 % of the upper, cold bound
     (``warnings`` over 5 %: a flame holds no gas much colder than ambient, so a field pressed there was fitted to
     data it cannot explain: deflections of the wrong sign, or a geometry that does not match the images; normal
-    runs leave none there, the multicam capture read without its lens model 2 %)."""
+    runs leave none there, the multicam capture read without its lens model 2 %). With a known truth
+    (``truth_T`` [K]) far from the hot bound, a flame at that bound is said to be a fit gone astray instead."""
     a, b = prior
     flame = sigma < -0.05
     share = float((sigma[flame] <= a + 0.01 * (b - a)).mean()) if flame.any() else 0.0
@@ -176,6 +178,11 @@ def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Amb
         warn.append(f"{100 * cold:.0f} % of the probe box sits at the coldest value the field can hold (sigma = "
                     f"{b:g}): the data pull the field colder than ambient (deflections of the wrong sign, or a rig "
                     "geometry or calibration that does not match the images)")
+    elif share > 0.01 and truth_T is not None and ambient.temperature_known and \
+            ambient.sigma_from_temperature(truth_T).min() > a + 0.25 * (b - a):
+        warn.append(f"{100 * share:.1f} % of the flame sits at the hottest the field can hold, while the known truth "
+                    f"peaks at {float(truth_T.max()):.0f} K, far from it: the fit went astray (lower train.lr), "
+                    "rather than a flame hotter than data.T_max")
     elif share > 0.01:
         what = (f"the hottest {ambient.temperature_from_sigma(np.float64(a)):.0f} K the field can hold "
                 f"(data.T_max={ambient.T_max:g} K)" if ambient.temperature_known else f"the prior's bound sigma = {a:g}")

@@ -232,6 +232,11 @@ def test_a_flame_at_the_prior_bound_is_reported_with_the_setting_to_raise():
     assert out["flame_at_prior_bound"] == pytest.approx(0.4)
     assert len(out["warnings"]) == 1 and out["warnings"][0].startswith("40.0 % of the flame sits at the hottest 2808 K the field can hold "
                                      "(data.T_max=2000 K)") and "raise data.T_max" in out["warnings"][0]
+    from nerif.field import prior_saturation  # issue 28: a diverged run blamed data.T_max, the truth far below it
+
+    cool = np.full_like(sigma, 600.0)
+    astray = prior_saturation(sigma, tr.interval, tr.scene.ambient, cool)["warnings"][0]
+    assert "the known truth peaks at 600 K, far from it: the fit went astray (lower train.lr)" in astray
     sigma[5:8] = 0.05  # a field pressed against the cold bound (sigma <= 0.05) over 30 % of the box
     out = tr.saturation(sigma)
     assert out["box_at_cold_bound"] == pytest.approx(0.3) and "pull the field colder than ambient" in out["warnings"][0]

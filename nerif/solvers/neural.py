@@ -169,7 +169,7 @@ class NeuralSolver(IterativeSolver):
 
     def saturation(self, sigma: np.ndarray) -> dict:
         """:func:`nerif.field.prior_saturation` of ``sigma`` within this field's prior."""
-        return prior_saturation(sigma, self.interval, self.scene.ambient)
+        return prior_saturation(sigma, self.interval, self.scene.ambient, self.scene.truth_T)
 
     # --- batches ---
     def _measured(self, d: torch.Tensor) -> Optional[torch.Tensor]:
