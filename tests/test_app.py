@@ -250,6 +250,10 @@ def test_the_summary_line_names_each_held_out_figure_as_metrics_json_does():
     line = summary_line(m, Path("out"))
     assert "deflection RMSE 2e-05 rad, PSNR 19.5 dB; displacement RMSE 0.3 px, PSNR 17.8 dB" in line
     assert "10 it: 1 s training (100.0 ms/it), 54 s in all" in line
+    m.update(wall_time_s=7.0, total_time_s=6.0, heldout_psnr_db=float("nan"))  # issue 28: a resumed frame
+    line = summary_line(m, Path("out"))
+    assert "10 it: 7 s training over every session (100.0 ms/it), 6 s in all this session" in line
+    assert "PSNR undefined (no deflection seen)" in line  # not "PSNR -inf dB"
 
 
 def test_help_says_what_nerif_does_and_lists_the_groups():

@@ -119,6 +119,8 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
             held.append(f"image residual {100 * m['heldout_photometric_rmse']:.2f} % of full range{ref}")
         parts.append("held out: " + "; ".join(held))
     parts += [f"WARNING: {w}" for w in m.get("warnings", [])]
-    parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training ({m['ms_per_iteration']:.1f} ms/it), "
-                 f"{m['total_time_s']:.0f} s in all")
+    resumed = m["wall_time_s"] > m["total_time_s"]  # training of earlier sessions counts, this process's time not
+    parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training{' over every session' if resumed else ''} "
+                 f"({m['ms_per_iteration']:.1f} ms/it), {m['total_time_s']:.0f} s in all"
+                 f"{' this session' if resumed else ''}")
     return "nerif: " + prefix + " | ".join(parts) + f" | {out_dir}"
