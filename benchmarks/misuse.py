@@ -277,6 +277,7 @@ def main() -> None:
     work = out / "work"
     work.mkdir(parents=True, exist_ok=True)
     fx = fixtures(work)
+    shutil.rmtree(work / "runs", ignore_errors=True)  # each case's own run folder starts empty
     todo = [c for c in cases(work, fx) if args.cases is None or c.name in args.cases]
     rows = []
     for i, case in enumerate(todo):
