@@ -343,8 +343,8 @@ def read_images(paths: list[Path], sensor_px, keep: bool = True) -> list[np.ndar
     for p in paths:
         img = read_grey(p)
         if img.shape != (h, w):
-            raise ValueError(f"{p} is {img.shape[1]} x {img.shape[0]} px but the rig's sensor_px is {w} x {h}: "
-                             "every image must be a full frame of the same camera")
+            raise ValueError(f"{p} is {img.shape[1]} x {img.shape[0]} px but the rig's sensor_px (a calibration's "
+                             f"image_size) is {w} x {h}: every image must be a full frame of the same camera")
         if depth is None:
             depth = (img.dtype, p)
         elif img.dtype != depth[0]:
