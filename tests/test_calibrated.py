@@ -74,10 +74,40 @@ def test_the_rig_is_the_calibrations_and_sees_the_probe(tmp_path):
     (lambda t: t.replace("camera_05_background_distance_mm: ", "camera_05_background_distance_mm: 100 #"),
      "camera 05: its background, 100 mm away, is not behind the probe box"),
 ])
-def test_a_bad_calibration_is_one_sentence_naming_the_camera_and_key(tmp_path, edit, message):
+def test_a_bad_calibration_is_one_sentence_naming_the_camera_and_key_before_any_flow(tmp_path, monkeypatch, edit,
+                                                                                     message):
+    import nerif.data.capture as cap_mod
+
+    def no_flow(*a, **k):
+        raise AssertionError("the flow ran on a bad calibration")
+
+    monkeypatch.setattr(cap_mod.FLOW, "build", no_flow)
     with pytest.raises(ValueError, match=message):
-        rig = read_rig(folder(tmp_path, edit))
-        rays_in_box(ProbeBox((60, 100, 60), 1.0), rig_cameras(rig, 4)[1])
+        cap_mod.capture(str(folder(tmp_path, edit)), {"name": "farneback"}, binning=4)
+
+
+def test_the_keys_the_data_readme_lists_are_the_keys_nerif_reads():
+    import re
+
+    from nerif.data.capture import CALIBRATION_KEYS
+
+    listed = set(re.findall(r"camera_KK_(\w+)", (MULTICAM / "README.md").read_text()))
+    assert listed == set(CALIBRATION_KEYS)
+    fs = cv2.FileStorage(str(MULTICAM / "calibration.yml"), cv2.FILE_STORAGE_READ)
+    assert all(not fs.getNode(f"camera_09_{k}").empty() for k in CALIBRATION_KEYS)
+
+
+def test_a_calibrated_rig_reconstructs_within_a_bound_of_the_arc(tmp_path):
+    """The same blob through an arc and through ``rig=calibrated`` (the same sensor, distances and span), ideal
+    deflections: the calibrated rig's error within 1.5x the arc's (0.9-1.1x measured)."""
+    from nerif.app import run
+    from tests.helpers import tiny_config
+
+    common = ["rig.n_cameras=6", "rig.span_deg=160", "rig.width_px=360", "rig.height_px=640", "rig.pitch_um=40",
+              "rig.binning=20", "train.iterations=200", "train.eval_every=100", "data.sensing=perpendicular"]
+    arc = run(tiny_config(*common, "rig.distance_mm=820", "rig.background_behind_mm=750"), tmp_path / "arc")
+    cal = run(tiny_config("rig=calibrated", *common), tmp_path / "cal")
+    assert cal["sigma_relative_error"] < 1.5 * arc["sigma_relative_error"], (cal, arc)
 
 
 def test_a_capture_written_through_a_calibrated_rig_reads_back_its_cameras_and_rays(tmp_path):
