@@ -27,3 +27,23 @@ def test_optical_flow_recovers_a_known_smooth_displacement(flow, pattern):
 def test_unknown_dis_preset_is_named():
     with pytest.raises(ValueError, match="DIS preset 'slow' unknown"):
         FLOW.build({"name": "dis", "preset": "slow"}, distorted=np.zeros((8, 8)), reference=np.zeros((8, 8)))
+
+
+def test_local_normalisation_is_blind_to_a_gain_and_a_smooth_added_light():
+    """``normalised`` (``flow.normalise_px``, issue 27): an image 10 % brighter plus a smooth glow of 30 % of its
+    mean brightness normalises to the image itself, to within the glow's curvature over the window; the images as
+    they are differ by that light."""
+    from nerif.sensing.flow import normalised
+
+    H, W = 240, 320
+    image = diffraction_blur(torch.as_tensor(PATTERNS.build({"name": "poisson_disk"}, height=H, width=W, seed=1)),
+                             2.1).numpy()
+    r, c = np.meshgrid(np.arange(H), np.arange(W), indexing="ij")
+    glow = 0.3 * image.mean() * np.exp(-((c - 160.0) ** 2 + (r - 120.0) ** 2) / (2 * 40.0**2))
+    lit = 1.1 * image + glow
+    inner = (slice(24, -24), slice(24, -24))
+    assert np.abs(lit - image)[inner].mean() > 0.03
+    diff = np.abs(normalised(lit, 8.0) - normalised(image, 8.0))[inner]
+    assert diff.mean() < 0.01 * np.abs(normalised(image, 8.0) - 0.5)[inner].mean() + 1e-3, diff.mean()
+    assert normalised(image, None) is image
+

@@ -50,3 +50,4 @@ def test_the_flames_light_and_a_gain_drift_change_only_the_distorted_image_as_se
     ratio = drift.images[0].distorted[unclipped].double().sum() / plain.images[0].distorted[unclipped].double().sum()
     assert abs(float(ratio) - 1.1) < 0.01
     assert plain.images[0].reference.shape == (160, 90) and plain.images[0].camera.binning == 8
+
