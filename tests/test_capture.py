@@ -94,7 +94,7 @@ def _read(path):
      "distorted_07.png that rig.yaml does not list"),
     (lambda r: r["views"]["angles_deg"].pop(), None, ValueError, "6 angles but views.images lists 7"),
     (None, lambda d: _write(d / "distorted_02.png", _read(d / "distorted_02.png")[:-8]), ValueError,
-     "distorted_02.png is 240 x 312 px but the rig's sensor_px (a calibration's image_size) is 240 x 320"),
+     "distorted_02.png is 240 x 312 px but the rig's sensor_px \\(a calibration's image_size\\) is 240 x 320"),
     (None, lambda d: _write(d / "reference_01.png", _read(d / "reference_01.png").astype(np.uint16) * 257),
      ValueError, "same bit depth"),
     (None, lambda d: [_write(d / f"distorted_{k:02d}.png", _read(d / f"distorted_{k:02d}.png").astype(np.uint16) * 257)
@@ -230,7 +230,7 @@ def _drop_last(rig):
     (None, lambda d: (d / "frame_0002" / "distorted_04.png").unlink(), "frame 2 view 4 image 'frame_0002/distorted_04.png'"),
     (_drop_last, None, "frame 2 lists 6 images for 7 views"),
     (None, lambda d: _write(d / "frame_0001" / "distorted_03.png", _read(d / "frame_0001" / "distorted_03.png")[8:]),
-     "distorted_03.png is 240 x 312 px but the rig's sensor_px (a calibration's image_size) is 240 x 320"),
+     "distorted_03.png is 240 x 312 px but the rig's sensor_px \\(a calibration's image_size\\) is 240 x 320"),
     (None, lambda d: shutil.copy(d / "frame_0001" / "distorted_03.png", d / "frame_0001" / "distorted_09.png"),
      r"frame_0001/distorted_09.png that rig.yaml does not list"),
     (lambda r: r["frames"][2].update(time_s=0.01), None, "frame 2 has time_s 0.01, not after frame 1's"),
