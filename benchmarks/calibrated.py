@@ -23,15 +23,16 @@ from __future__ import annotations
 import argparse
 import shutil
 import sys
+from dataclasses import replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from ablation import header, run_arguments, run_named, write_report  # noqa: E402
+from nerif.data.capture import calibrated_camera, read_calibration, write_calibration  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 MULTICAM, ARC = DATA / "independent_capture_bunsen_multicam", DATA / "independent_capture_bunsen"
@@ -43,27 +44,9 @@ RIG = {"format": "nerif-capture", "version": 3, "calibration": "calibration.yml"
 def write_ideal(src: Path, dst: Path) -> None:
     """``src`` (a cv2.FileStorage calibration) with every distortion zero and every principal point at its
     sensor's centre."""
-    fs = cv2.FileStorage(str(src), cv2.FILE_STORAGE_READ)
-    out = cv2.FileStorage(str(dst), cv2.FILE_STORAGE_WRITE)
-    n = int(fs.getNode("n_cameras").real())
-    out.write("n_cameras", n)
-    for k in range(n):
-        pre = f"camera_{k:02d}_"
-        for key in ("image", "reference"):
-            out.write(pre + key, fs.getNode(pre + key).string())
-        size = fs.getNode(pre + "image_size").mat()
-        K = fs.getNode(pre + "camera_matrix").mat().copy()
-        w, h = np.asarray(size).reshape(-1)
-        K[0, 2], K[1, 2] = w / 2 - 0.5, h / 2 - 0.5  # OpenCV's pixel centres at integers
-        out.write(pre + "image_size", size)
-        out.write(pre + "camera_matrix", K)
-        out.write(pre + "dist_coeffs", np.zeros((1, 5)))
-        for key in ("rvec", "tvec"):
-            out.write(pre + key, fs.getNode(pre + key).mat())
-        for key in ("pixel_pitch_mm", "background_distance_mm"):
-            out.write(pre + key, fs.getNode(pre + key).real())
-    out.release()
-    fs.release()
+    cal = read_calibration(src)
+    cameras = [replace(calibrated_camera(c, 32.0), distortion=None, centre_px=None) for c in cal]
+    write_calibration(cameras, [c["image"] for c in cal], [c["reference"] for c in cal], dst)
 
 
 def multicam_folder(root: Path, ideal: bool) -> Path:
