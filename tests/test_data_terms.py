@@ -76,3 +76,22 @@ def test_training_on_the_images_runs_and_lowers_the_image_misfit(realistic):
     losses = [s.step()["loss_discrete"] for _ in range(30)]
     assert np.isfinite(losses).all() and np.mean(losses[-5:]) < 0.8 * np.mean(losses[:5])
     assert s.labels["data_term"] == "images"
+
+
+def test_a_flow_weight_adds_the_flows_misfit_on_the_same_rays(realistic):
+    """``flow_weight`` adds ``w * mean |eps - eps_flow|^2`` over the rays already rendered: with it large, the
+    flow's own deflections cost less than the truth, which the images alone prefer."""
+    cfg, scene = realistic
+    ph = PHANTOMS.build(group(cfg, "phantom"))
+    alone, weighted = image_term(scene), image_term(scene, flow_weight=10.0)
+    batch = alone.draw(0)
+    eps = voxel_deflection(torch.as_tensor(ph.delta, dtype=torch.float32), ph.box, batch.origins, batch.dirs)
+    truth, flow = eps / scene.scale, scene.observed[batch.index]
+
+    def cost(term, e):
+        return float(term.terms({"discrete": e}, batch, 0)["discrete"])
+
+    assert cost(alone, truth) < cost(alone, flow)
+    assert cost(weighted, flow) < cost(weighted, truth)
+    misfit = float(((truth - flow) ** 2).sum(-1).mean())
+    assert cost(weighted, truth) == pytest.approx(cost(alone, truth) + 10.0 * misfit, rel=1e-5)

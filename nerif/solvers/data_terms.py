@@ -73,10 +73,13 @@ class ImageTerm:
         interpolation: of the reference image: ``bicubic`` or ``bilinear``.
         patch: rays per side of a patch (at least 2); a step draws ``rays_per_batch / patch^2`` patches.
         lowpass_px: blur both images by a Gaussian of this width [px] first (sensor noise); null: none.
+        flow_weight: after the warm-up, the flow term on the same rays is added with this weight (0: images alone).
+            It costs no rendering, and holds what the images barely pin down: a small displacement common to
+            many rays (a level of sigma that varies along the flame), which the images' noise leaves to drift.
     """
 
     def __init__(self, flow_warmup: float = 0.25, highpass_px: Optional[float] = 8.0, interpolation: str = "bicubic",
-                 patch: int = 2, lowpass_px: Optional[float] = None):
+                 patch: int = 2, lowpass_px: Optional[float] = None, flow_weight: float = 0.0):
         if not 0.0 <= flow_warmup < 1.0:
             raise ValueError(f"data_term.flow_warmup={flow_warmup}: a share of the iterations within [0, 1)")
         if highpass_px is not None and not highpass_px >= 0:
@@ -86,7 +89,9 @@ class ImageTerm:
         if not (isinstance(patch, int) and patch >= 2):
             raise ValueError(f"data_term.patch={patch}: rays per side of a patch, at least 2")
         self.flow_warmup, self.highpass_px, self.mode, self.k = float(flow_warmup), highpass_px, interpolation, patch
-        self.lowpass_px = lowpass_px
+        if not flow_weight >= 0:
+            raise ValueError(f"data_term.flow_weight={flow_weight}: a weight cannot be negative")
+        self.lowpass_px, self.flow_weight = lowpass_px, float(flow_weight)
         self.flow = DeflectionTerm()
 
     def setup(self, scene: Scene, batches: RayBatcher, iterations: int, masks=None) -> "ImageTerm":
@@ -166,4 +171,7 @@ class ImageTerm:
             u = torch.einsum("pk,ckd->cpd", self.weights.to(u.dtype), u)  # (C, b^2, 2)
             r = photometric_residual(self.reference, self.distorted, x, u.reshape(-1, 2), self.mode)
             out[name] = (r.reshape(len(top), -1).pow(2).mean(-1) / self.scale[top]).mean()
+        if self.flow_weight > 0:
+            flow = self.flow.terms(eps, batch, iteration)
+            out = {name: out[name] + self.flow_weight * flow[name] for name in out}
         return out
