@@ -74,8 +74,8 @@ class ImageTerm:
         patch: rays per side of a patch (at least 2); a step draws ``rays_per_batch / patch^2`` patches.
         lowpass_px: blur both images by a Gaussian of this width [px] first (sensor noise); null: none.
         flow_weight: after the warm-up, the flow term on the same rays is added with this weight (0: images alone).
-            It costs no rendering, and holds what the images barely pin down: a small displacement common to
-            many rays (a level of sigma that varies along the flame), which the images' noise leaves to drift.
+            It costs no rendering. On the independent capture it keeps the plume's level, which the image fit
+            alone leaves too weak (why is not established: ``benchmarks/RESULTS.md``).
     """
 
     def __init__(self, flow_warmup: float = 0.25, highpass_px: Optional[float] = 8.0, interpolation: str = "bicubic",
