@@ -23,7 +23,8 @@ def realistic():
 
 def image_term(scene, **settings):
     batches = RayBatcher(scene, None, 256, "all", 0.0, torch.Generator().manual_seed(0))
-    cfg = {"name": "images", "flow_warmup": 0.0, "highpass_px": 8.0, "interpolation": "bicubic", **settings}
+    cfg = {"name": "images", "flow_warmup": 0.0, "highpass_px": 8.0, "interpolation": "bicubic", "flow_weight": 0.0,
+           **settings}
     return DATA_TERMS.build(cfg).setup(scene, batches, 100)
 
 
@@ -95,3 +96,59 @@ def test_a_flow_weight_adds_the_flows_misfit_on_the_same_rays(realistic):
     assert cost(weighted, flow) < cost(weighted, truth)
     misfit = float(((truth - flow) ** 2).sum(-1).mean())
     assert cost(weighted, truth) == pytest.approx(cost(alone, truth) + 10.0 * misfit, rel=1e-5)
+
+
+def test_auto_fits_the_images_where_the_scene_has_them_and_the_flow_where_it_does_not(realistic):
+    """``data_term=auto`` (the default) scores a realistic scene's batch as ``images`` does, and an ideal scene's,
+    which has no images, as ``flow`` does, from the first iteration on; the solver's label says which."""
+    _, scene = realistic
+    batches = RayBatcher(scene, None, 256, "all", 0.0, torch.Generator().manual_seed(0))
+    auto = DATA_TERMS.build({"name": "auto", "flow_warmup": 0.0}).setup(scene, batches, 100)
+    images = image_term(scene, flow_weight=1.0)
+    batch = images.draw(0)
+    e = {"discrete": 0.5 * scene.observed[batch.index]}
+    assert auto.fitted == "images" and auto.terms(e, batch, 0) == images.terms(e, batch, 0)
+
+    ideal = DATASETS.build(group(tiny_config(), "data"))
+    batches = RayBatcher(ideal, None, 64, "all", 0.0, torch.Generator().manual_seed(0))
+    auto = DATA_TERMS.build({"name": "auto", "flow_warmup": 0.0}).setup(ideal, batches, 100)
+    batch = auto.draw(99)
+    assert auto.fitted == "flow" and len(batch.index) == 64
+    e = {"discrete": torch.zeros(64, 3)}
+    assert torch.equal(auto.terms(e, batch, 99)["discrete"], ideal.observed[batch.index].pow(2).sum(-1).mean())
+    cfg = tiny_config("train.iterations=2")
+    assert "data_term" not in solver(cfg, ideal).labels
+
+
+def test_auto_fits_the_flow_where_rays_lie_at_every_image_pixel():
+    """The image term's cells need rays at least 2 image pixels apart: images binned as the rays are leave
+    ``auto`` on the flow, and ``images`` refuses them, naming the fix."""
+    cfg = tiny_config(*REALISTIC[:2], "data.sensor.image_binning=40")
+    scene = DATASETS.build(group(cfg, "data"))
+    batches = RayBatcher(scene, None, 64, "all", 0.0, torch.Generator().manual_seed(0))
+    assert DATA_TERMS.build({"name": "auto"}).setup(scene, batches, 100).fitted == "flow"
+    with pytest.raises(ValueError, match="raise the binning"):
+        image_term(scene)
+
+
+def test_on_a_tiny_capture_training_on_the_images_ends_closer_to_the_truth_than_the_flow(tmp_path):
+    """A capture folder (8-bit images through the realistic chain, an f/32 aperture) of a 3 mm flame, read back
+    through the optical flow, trained 200 iterations: the default (images where the data hold them, the flow
+    term beside) ends with a sigma error at least 5 % below the flow's alone (measured: 0.171 against 0.185)."""
+    from omegaconf import OmegaConf
+
+    from nerif.app import run
+    from nerif.data.capture import write_capture
+
+    cfg = tiny_config("rig.width_px=240", "rig.height_px=320", "rig.binning=8", "phantom.shape=[16,16,16]",
+                      "phantom.voxel_mm=2.0", "phantom.width_mm=3.0", "data.sensing=realistic", "rig.n_cameras=7",
+                      "data.sensor.aperture_rays=8")
+    scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device="cpu")
+    root = write_capture(scene, tmp_path / "capture")
+    np.savez(root / "volume.npz", T=scene.truth_T)
+    error = {}
+    for term in ("flow", "auto"):
+        run_cfg = tiny_config("data=capture", f"data.root={root}", "data.binning=8", f"data.truth={root / 'volume.npz'}",
+                              "train.iterations=200", "train.eval_every=200", f"data_term={term}", synthetic=False)
+        error[term] = run(run_cfg, tmp_path / term)["sigma_relative_error"]
+    assert error["auto"] < 0.95 * error["flow"], error

@@ -36,7 +36,7 @@ def test_the_unified_operator_passes_the_adjoint_identity(scene, linearize_at):
 def test_two_rows_per_ray_are_the_least_squares_of_every_pixel_of_its_block(scene):
     """sum over the block's pixels of (g . u - (I_dist - I_ref))^2 = |M eps - c|^2 + const for any eps: the
     difference between two deflections' costs is the same computed either way."""
-    M, c = unified_system(scene, 8.0, "zero")
+    M, c = unified_system(scene, 8.0, "zero", deflection_units=False)
     v, cam, im = 1, scene.cameras[1], scene.images[1]
     b = cam.binning // im.camera.binning
     sl = scene.view_slice(v)
@@ -61,3 +61,26 @@ def test_two_rows_per_ray_are_the_least_squares_of_every_pixel_of_its_block(scen
         return ((M[rays] @ e[..., None])[..., 0] - c[rays]).pow(2).sum(-1)
 
     torch.testing.assert_close(rows(e1) - rows(e2), per_pixel(e1) - per_pixel(e2), rtol=1e-5, atol=1e-9)
+
+
+def test_the_default_data_term_is_two_step_for_the_voxel_solver(scene):
+    """``data_term=auto`` fits the images for the neural solver but the flow's deflections for CGLS (two-step,
+    measured better than unified on the independent capture): three components per ray, not two rows."""
+    s = solver(tiny_config(*REALISTIC, "solver=cgls"), scene)
+    assert s.cgls.b.shape == (len(scene.dirs), 3) and "data_term" not in s.labels
+    s = solver(tiny_config(*REALISTIC, "solver=cgls", "data_term=images"), scene)
+    assert s.cgls.b.shape == (len(scene.dirs), 2) and s.labels["data_term"] == "images"
+
+
+def test_the_rows_weigh_a_deflection_as_the_flows_rows_do(scene):
+    """In deflection units, a change of the deflections perpendicular to the rays changes the squared residual of
+    the two rows by about its own squared size (the flow's rows: exactly), so that ``solver.lam`` weighs the same
+    for both."""
+    d = torch.randn(len(scene.dirs), 3, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
+    dirs = scene.dirs.double()
+    d = d - (d * dirs).sum(-1, keepdim=True) * dirs
+
+    def worth(M):
+        return float((M @ d[..., None]).pow(2).sum((-1, -2)).mean() / d.pow(2).sum(-1).mean())
+
+    assert 0.5 < worth(unified_system(scene, 8.0, "zero")[0]) < 2.0

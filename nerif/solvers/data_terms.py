@@ -1,5 +1,6 @@
-"""What the neural field is fitted to (``data_term=``): the deflections the optical flow measured (``flow``), or
-the background images themselves (``images``).
+"""What the neural field is fitted to (``data_term=``): the deflections the optical flow measured (``flow``), the
+background images themselves (``images``), or the images where the data hold them and the flow elsewhere
+(``auto``, the default).
 
 A data term draws each iteration's rays (:meth:`draw` -> :class:`RayBatch`) and, given the deflections the
 field renders along them (operator name -> (R, 3) sigma units), returns the misfit per operator
@@ -8,6 +9,7 @@ same whichever term is fitted.
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Optional
 
@@ -21,6 +23,7 @@ from nerif.sensing.displacement import displacement_matrix
 from nerif.solvers.batches import RayBatcher
 
 DATA_TERMS = Registry("data term", package="nerif.solvers")
+log = logging.getLogger(__name__)
 MARGIN = 4  # rows of border between views in the image term's stacked images (bicubic reads 2 px around)
 
 
@@ -43,6 +46,8 @@ def scene_rays(scene: Scene, index: torch.Tensor) -> RayBatch:
 class DeflectionTerm:
     """``mean |eps - eps_obs|^2`` over random rays, ``eps_obs`` the scene's observed deflections (the optical
     flow's displacements converted through the rig, or a synthetic scene's own)."""
+
+    fitted = "flow"  # what the term fits once set up: flow | images
 
     def setup(self, scene: Scene, batches: RayBatcher, iterations: int, masks=None) -> "DeflectionTerm":
         self.scene, self.batches = scene, batches
@@ -74,12 +79,15 @@ class ImageTerm:
         patch: rays per side of a patch (at least 2); a step draws ``rays_per_batch / patch^2`` patches.
         lowpass_px: blur both images by a Gaussian of this width [px] first (sensor noise); null: none.
         flow_weight: after the warm-up, the flow term on the same rays is added with this weight (0: images alone).
-            It costs no rendering. On the independent capture it keeps the plume's level, which the image fit
-            alone leaves too weak (why is not established: ``benchmarks/RESULTS.md``).
+            It costs no rendering. The images fix the fine structure the flow's window blurs; the flow keeps the
+            low-frequency level, which the image fit alone leaves off on the independent captures (why is not
+            established: ``benchmarks/RESULTS.md``).
     """
 
+    fitted = "images"
+
     def __init__(self, flow_warmup: float = 0.25, highpass_px: Optional[float] = 8.0, interpolation: str = "bicubic",
-                 patch: int = 2, lowpass_px: Optional[float] = None, flow_weight: float = 0.0):
+                 patch: int = 2, lowpass_px: Optional[float] = None, flow_weight: float = 1.0):
         if not 0.0 <= flow_warmup < 1.0:
             raise ValueError(f"data_term.flow_warmup={flow_warmup}: a share of the iterations within [0, 1)")
         if highpass_px is not None and not highpass_px >= 0:
@@ -97,20 +105,14 @@ class ImageTerm:
     def setup(self, scene: Scene, batches: RayBatcher, iterations: int, masks=None) -> "ImageTerm":
         """The cells of every view, the displacement matrices of every ray, the images to compare; ``batches``
         is the flow term's (its settings and random stream are this term's too)."""
-        if scene.images is None:
-            raise ValueError("data_term=images needs the background images, which these data do not have: use "
-                             "data=capture or data.sensing=realistic, or data_term=flow")
+        why = self.unfit(scene)
+        if why:
+            hint = ": use data=capture or data.sensing=realistic, or data_term=flow" if scene.images is None else ""
+            raise ValueError(f"data_term=images needs {why}{hint}")
         self.scene, self.flow_iterations = scene, int(round(self.flow_warmup * iterations))
         self.flow.setup(scene, batches, iterations)
         device = scene.dirs.device
-        shapes = {(cam.binning // im.camera.binning, cam.binning % im.camera.binning, *im.reference.shape)
-                  for cam, im in zip(scene.cameras, scene.images)}
-        b, rest, H, W = next(iter(shapes))
-        if len(shapes) > 1 or rest or b < 2:
-            raise ValueError("data_term=images needs every view's rays a whole number (at least 2) of image pixels "
-                             f"apart, the same for all, on images of one size (rays binned "
-                             f"{scene.cameras[0].binning}, images {scene.images[0].camera.binning}): raise the "
-                             "binning (data.binning or rig.binning)")
+        b, H = scene.cameras[0].binning // scene.images[0].camera.binning, scene.images[0].reference.shape[0]
         k = self.k
         patch = torch.full((len(scene.dirs), k * k), -1, dtype=torch.long, device=device)  # rays of each patch
         gain, scale, refs, dists = [], [], [], []
@@ -142,6 +144,21 @@ class ImageTerm:
                                   max(1, batches.rays_per_batch // (k * k)), batches.views_per_batch,
                                   batches.outside_fraction, batches.generator, allowed)
         return self
+
+    @staticmethod
+    def unfit(scene: Scene) -> str:
+        """What the scene lacks for this term ("" when nothing): its background images, or rays a whole number
+        (at least 2, the same for every view) of image pixels apart on images of one size."""
+        if scene.images is None:
+            return "the background images, which these data do not have"
+        shapes = {(cam.binning // im.camera.binning, cam.binning % im.camera.binning, *im.reference.shape)
+                  for cam, im in zip(scene.cameras, scene.images)}
+        b, rest, _, _ = next(iter(shapes))
+        if len(shapes) > 1 or rest or b < 2:
+            return ("every view's rays a whole number (at least 2) of image pixels apart, the same for all, on "
+                    f"images of one size (rays binned {scene.cameras[0].binning}, images "
+                    f"{scene.images[0].camera.binning}): raise the binning (data.binning or rig.binning)")
+        return ""
 
     def draw(self, iteration: int) -> RayBatch:
         if iteration < self.flow_iterations:
@@ -175,3 +192,20 @@ class ImageTerm:
             flow = self.flow.terms(eps, batch, iteration)
             out = {name: out[name] + self.flow_weight * flow[name] for name in out}
         return out
+
+
+@DATA_TERMS.register("auto")
+class ImagesWhereGiven(ImageTerm):
+    """:class:`ImageTerm` where the scene holds its background images (``data=capture``,
+    ``data.sensing=realistic``) with rays at least 2 image pixels apart; :class:`DeflectionTerm` throughout where it
+    does not (a synthetic scene's ideal deflections, the paper's deflection PNGs, rays at every image pixel), with
+    the reason logged. :attr:`fitted` says which."""
+
+    def setup(self, scene: Scene, batches: RayBatcher, iterations: int, masks=None) -> "ImagesWhereGiven":
+        why = self.unfit(scene)
+        if not why:
+            return super().setup(scene, batches, iterations, masks)
+        log.info("data_term=auto fits the flow's deflections: data_term=images would need %s", why)
+        self.fitted, self.scene, self.flow_iterations = "flow", scene, iterations
+        self.flow.setup(scene, batches, iterations)
+        return self

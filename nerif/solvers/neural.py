@@ -100,8 +100,6 @@ class NeuralSolver(IterativeSolver):
         self.loss_cfg = dict(loss)
         self.optim_cfg = {k: train[k] for k in ("lr", "betas", "eps", "lr_min")}
         self.labels.update(encoder=encoder["name"], grad=grad["name"])
-        if data_term is not None and data_term["name"] != "flow":
-            self.labels["data_term"] = data_term["name"]
 
     def setup(self, scene: Scene, masks) -> "NeuralSolver":
         """The field on the scene's probe box (gated by ``masks.gate``), its optimiser, and the ray pools training
@@ -122,6 +120,8 @@ class NeuralSolver(IterativeSolver):
         self.batches = RayBatcher(scene, masks.inside, self.rays_per_batch, self.views_per_batch,
                                   self.outside_fraction, self.generator)
         self.data_term.setup(scene, self.batches, self.iterations, masks)
+        if self.data_term.fitted != "flow":
+            self.labels["data_term"] = self.data_term.fitted
         rms = float(scene.eps[self.batches.inside()].double().norm(dim=-1).pow(2).mean().sqrt()) / scene.scale
         tv = TotalVariation(scene.box, lc["tv_weight"], lc["tv_points"], rms)
         self.tv = tv if tv.active else None

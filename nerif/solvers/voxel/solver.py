@@ -87,14 +87,13 @@ class CGLSSolver(IterativeSolver):
         self.projector_name, self.max_matrix_gib = projector, float(max_matrix_gib)
         self.step_mm, self.chunk, self.dtype = step_mm, int(chunk), getattr(torch, dtype)
         self.data_term = dict(data_term or {"name": "flow"})
-        if self.data_term["name"] not in ("flow", "images"):
-            raise ValueError(f"solver=cgls fits data_term=flow or images (unified BOS), got '{self.data_term['name']}'")
+        if self.data_term["name"] not in ("flow", "images", "auto"):
+            raise ValueError(f"solver=cgls fits data_term=flow (or auto: the same), or images (unified BOS), got "
+                             f"'{self.data_term['name']}'")
         if linearize_at not in ("zero", "flow"):
             raise ValueError(f"solver.linearize_at must be zero or flow, got '{linearize_at}'")
         self.linearize_at = linearize_at
         self.labels.update(regularizer=regularizer, lam=float(lam))
-        if self.data_term["name"] == "images":
-            self.labels["data_term"] = "images"
 
     def setup(self, scene, masks) -> "CGLSSolver":
         """Build the projector for every ray of ``scene`` and the CGLS state; unknowns: the voxels off the ambient
@@ -118,7 +117,10 @@ class CGLSSolver(IterativeSolver):
         self.unknowns = int(unknown.sum())
         mask = torch.as_tensor(unknown, dtype=dt, device=self.device)
         d = scene.dirs.to(dt)
-        if self.data_term["name"] == "images":  # unified BOS: rows of the images' linearised equations
+        # auto: two-step, which measured better than unified on the independent capture (benchmarks/RESULTS.md)
+        self.fitted = "images" if self.data_term["name"] == "images" else "flow"
+        if self.fitted == "images":  # unified BOS: rows of the images' linearised equations
+            self.labels["data_term"] = "images"
             M, c = unified_system(scene, self.data_term.get("highpass_px"), self.linearize_at,
                                   lowpass_px=self.data_term.get("lowpass_px"))
             M, b = M.to(dt), c.to(dt)
@@ -158,7 +160,7 @@ class CGLSSolver(IterativeSolver):
     def evaluate(self) -> dict:
         ev = self.evaluation
         m = {"iteration": self.iteration, "wall_time_s": self.train_seconds, **ev.field_errors(self.reconstruction())}
-        if self.data_term["name"] == "images":  # the residual is photometric: deflections on the evaluation rays
+        if self.fitted == "images":  # the residual is photometric: deflections on the evaluation rays
             m["deflection_rmse"] = ev.deflection_errors({"cgls": self.predict(*ev.train_rays())})["deflection_rmse_cgls"]
         else:
             r = self.cgls.r * self.scene.scale  # data residual [rad]

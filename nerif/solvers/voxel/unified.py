@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import torch
 
-from nerif.losses.images import bandpass, block_pixels
+from nerif.losses.images import bandpass, block_pixels, photometric_scale
 from nerif.sensing.displacement import displacement_matrix
 from nerif.sensing.imaging import sample
 
 
-def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: float = 0.01, lowpass_px=None):
+def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: float = 0.01, lowpass_px=None,
+                   deflection_units: bool = True):
     """The unified system of every ray of ``scene``: ``M`` (N, 2, 3) with ``M eps = L^T A eps`` (``eps`` in sigma
     units) and its right-hand side ``c`` (N, 2), in float64 on the scene's device.
 
@@ -28,6 +29,11 @@ def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: floa
             (:func:`nerif.losses.images.bandpass`; None: as they are).
         linearize_at: ``zero``, or ``flow``: about the displacements of the scene's observations.
         step_px: the image gradient is the interpolant's, by central differences of this step.
+        deflection_units: divide each view's rows by ``b sqrt(photometric_scale)`` (``b^2`` pixels per ray), so
+            that a row's squared residual is worth a squared deflection of sigma, as the flow's rows are: a
+            regulariser's ``lam`` then weighs the same for both data. In intensity units, on the independent
+            capture, a row's squared residual was 0.011 of the deflection's: the flow's bracket of weights was
+            about 90x too strong there. False: the pixels' own equations (intensity units).
     """
     if scene.images is None:
         raise ValueError("solver=cgls data_term=images (unified BOS) needs the background images, which these data "
@@ -55,6 +61,7 @@ def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: floa
         h = (g * diff[..., None]).sum(1) + (G @ u0[..., None])[..., 0]
         G = G + 1e-9 * G.diagonal(dim1=1, dim2=2).sum(-1).mean() * torch.eye(2, dtype=G.dtype, device=G.device)
         L = torch.linalg.cholesky(G)
-        Ms.append(L.transpose(1, 2) @ A)
-        cs.append(torch.linalg.solve_triangular(L, h[..., None], upper=False)[..., 0])
+        unit = b * photometric_scale(ref, A) ** 0.5 if deflection_units else 1.0
+        Ms.append(L.transpose(1, 2) @ A / unit)
+        cs.append(torch.linalg.solve_triangular(L, h[..., None], upper=False)[..., 0] / unit)
     return torch.cat(Ms), torch.cat(cs)
