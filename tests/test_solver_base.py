@@ -1,4 +1,6 @@
 """The loop every solver shares: evaluation cadence, early stop, checkpoints, Ctrl-C, resume, fixed rays."""
+import os
+import signal
 import time
 
 import pytest
@@ -6,7 +8,7 @@ import torch
 
 from nerif.data import DATASETS
 from nerif.evaluation import fixed_rays
-from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver
+from nerif.solvers.base import SOLVERS, DivergenceError, Interrupted, IterativeSolver
 
 METRICS = {"flame_threshold_K": 1.0, "eval_rays_per_view": 4}
 
@@ -70,6 +72,38 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes_exactly(tmp_path):
     assert resumed.iteration == 5 and resumed.x == 2.0**-5
     resumed.fit(checkpoint_every=100, progress=False)
     assert resumed.x == 2.0**-10 and [h["iteration"] for h in resumed.history] == [3, 6, 9, 10]
+
+
+class SignalsInAFinalizer(Halving):
+    """A solver whose step at ``signal_at`` drops an object whose finalizer sends the process ``signum``: the
+    signal lands inside ``__del__``, where a raised exception is ignored."""
+
+    def __init__(self, signum, signal_at, **kw):
+        super().__init__(**kw)
+        self.signum, self.signal_at = signum, signal_at
+
+    def step(self):
+        if self.iteration == self.signal_at:
+            signum = self.signum
+
+            class Dropped:
+                def __del__(self):
+                    os.kill(os.getpid(), signum)
+                    for _ in range(1000):  # the handler runs here, between these bytecodes
+                        pass
+
+            Dropped()
+        return super().step()
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGUSR2])
+def test_a_signal_that_lands_in_a_finalizer_still_stops_the_run_after_its_step(tmp_path, signum):
+    s = SignalsInAFinalizer(signum, 4, iterations=10)
+    with pytest.raises(Interrupted) as e:
+        s.fit(checkpoint_every=100, checkpoint=tmp_path / "ck.pt", progress=False)
+    assert e.value.signal_name == signal.Signals(signum).name
+    assert s.iteration == 5 and torch.load(tmp_path / "ck.pt", weights_only=False)["iteration"] == 5
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handlers are given back
 
 
 def test_checkpoints_come_at_most_the_time_interval_apart(tmp_path):

@@ -82,28 +82,34 @@ class Interrupted(KeyboardInterrupt):
         self.signal_name = signal_name
 
 
-CAUGHT_SIGNALS = ("SIGTERM", "SIGUSR2")
+CAUGHT_SIGNALS = ("SIGINT", "SIGTERM", "SIGUSR2")
 
 
 @contextmanager
-def sigterm_interrupts():
-    """Within the block, SIGTERM and SIGUSR2 raise :class:`Interrupted` as Ctrl-C does (main thread only; the
-    previous handlers are restored after, so that a launcher's own SIGUSR2 handler, submitit's requeue, can be
-    given the signal again once the checkpoint is saved)."""
+def stop_signals():
+    """Within the block, Ctrl-C (SIGINT), SIGTERM (Slurm preemption, ``timeout``, a container stop) and SIGUSR2
+    (Slurm's warning before the time limit) are recorded in the list the block is given, not raised: the block
+    checks it between steps and stops there. An exception raised wherever the signal lands can be lost (in a
+    finalizer it is ignored, and the run went on). A second signal of a kind acts at once, as without the block
+    (Ctrl-C twice: KeyboardInterrupt). Main thread only; the previous handlers are restored after, so that a
+    launcher's own SIGUSR2 handler, submitit's requeue, can be given the signal again once the checkpoint is saved."""
+    received: list[str] = []
     if threading.current_thread() is not threading.main_thread():
-        yield
+        yield received
         return
+    previous: dict = {}
 
     def handler(signum, frame):
-        raise Interrupted(signal.Signals(signum).name)
+        received.append(signal.Signals(signum).name)
+        signal.signal(signum, previous[signum] or signal.SIG_DFL)
 
     numbers = [getattr(signal, name) for name in CAUGHT_SIGNALS if hasattr(signal, name)]
-    previous = {n: signal.signal(n, handler) for n in numbers}
+    previous.update({n: signal.signal(n, handler) for n in numbers})
     try:
-        yield
+        yield received
     finally:
         for n, h in previous.items():
-            signal.signal(n, h)
+            signal.signal(n, h or signal.SIG_DFL)
 
 
 def check_faces(setting, key: str = "loss.ambient_faces", auto: bool = True) -> None:
@@ -281,7 +287,7 @@ class IterativeSolver:
         last = self.history[-1] if self.history else {}
         saved_at = time.monotonic()
         try:
-            with sigterm_interrupts():
+            with stop_signals() as received:
                 while self.iteration < self.iterations:
                     terms = self.step()
                     bar.update(1)
@@ -300,6 +306,8 @@ class IterativeSolver:
                     if checkpoint is not None and due:
                         self._checkpoint(checkpoint)
                         saved_at = time.monotonic()
+                    if received:
+                        raise Interrupted(received[0])
                     if done:
                         break
         except KeyboardInterrupt as e:
