@@ -199,8 +199,10 @@ def test_a_signal_saves_a_checkpoint_says_so_in_one_line_and_the_run_resumes(tmp
     ``train.resume=auto`` or as a requeued Slurm job (``SLURM_RESTART_COUNT``)."""
     args = [*TINY, "train.iterations=100000", "train.eval_every=100000", "train.checkpoint_every=100000",
             f"hydra.run.dir={tmp_path}"]
+    # SIGINT as in a terminal: a job a shell started in the background (CI's, for one) inherits it ignored
     p = subprocess.Popen([sys.executable, "-m", "nerif", *args], cwd=ROOT, stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True)
+                         stderr=subprocess.STDOUT, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 300
     while not (tmp_path / "tensorboard").is_dir() and time.monotonic() < deadline:  # training has started
         time.sleep(0.2)

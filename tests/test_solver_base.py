@@ -98,12 +98,27 @@ class SignalsInAFinalizer(Halving):
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGUSR2])
 def test_a_signal_that_lands_in_a_finalizer_still_stops_the_run_after_its_step(tmp_path, signum):
-    s = SignalsInAFinalizer(signum, 4, iterations=10)
-    with pytest.raises(Interrupted) as e:
-        s.fit(checkpoint_every=100, checkpoint=tmp_path / "ck.pt", progress=False)
-    assert e.value.signal_name == signal.Signals(signum).name
-    assert s.iteration == 5 and torch.load(tmp_path / "ck.pt", weights_only=False)["iteration"] == 5
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handlers are given back
+    before = signal.signal(signum, signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL)
+    try:  # as in a terminal (a shell's background job ignores SIGINT, and so does the run)
+        s = SignalsInAFinalizer(signum, 4, iterations=10)
+        with pytest.raises(Interrupted) as e:
+            s.fit(checkpoint_every=100, checkpoint=tmp_path / "ck.pt", progress=False)
+        assert e.value.signal_name == signal.Signals(signum).name
+        assert s.iteration == 5 and torch.load(tmp_path / "ck.pt", weights_only=False)["iteration"] == 5
+        expected = signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL
+        assert signal.getsignal(signum) is expected  # the handler is given back
+    finally:
+        signal.signal(signum, before)
+
+
+def test_a_signal_ignored_on_entry_stays_ignored():
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        s = SignalsInAFinalizer(signal.SIGINT, 4, iterations=10)
+        s.fit(checkpoint_every=100, progress=False)
+        assert s.iteration == 10 and signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, before)
 
 
 def test_checkpoints_come_at_most_the_time_interval_apart(tmp_path):

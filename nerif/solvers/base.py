@@ -91,7 +91,8 @@ def stop_signals():
     (Slurm's warning before the time limit) are recorded in the list the block is given, not raised: the block
     checks it between steps and stops there. An exception raised wherever the signal lands can be lost (in a
     finalizer it is ignored, and the run went on). A second signal of a kind acts at once, as without the block
-    (Ctrl-C twice: KeyboardInterrupt). Main thread only; the previous handlers are restored after, so that a
+    (Ctrl-C twice: KeyboardInterrupt). A signal ignored on entry stays ignored (as Python leaves SIGINT in a job a
+    shell started in the background). Main thread only; the previous handlers are restored after, so that a
     launcher's own SIGUSR2 handler, submitit's requeue, can be given the signal again once the checkpoint is saved."""
     received: list[str] = []
     if threading.current_thread() is not threading.main_thread():
@@ -104,7 +105,7 @@ def stop_signals():
         signal.signal(signum, previous[signum] or signal.SIG_DFL)
 
     numbers = [getattr(signal, name) for name in CAUGHT_SIGNALS if hasattr(signal, name)]
-    previous.update({n: signal.signal(n, handler) for n in numbers})
+    previous.update({n: signal.signal(n, handler) for n in numbers if signal.getsignal(n) is not signal.SIG_IGN})
     try:
         yield received
     finally:
