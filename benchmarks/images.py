@@ -16,10 +16,11 @@ Scenes (``--scenes``):
   folder made under ``--out`` as ``benchmarks/calibrated.py`` makes it).
 
 Per scene: nerif with ``data_term=flow``, with the images alone (``data_term=images data_term.flow_weight=0``)
-and with its default (``data_term=auto``: the images with the flow term beside them); CGLS-TV two-step (the flow's deflections)
-and unified (the images' linearised equations, ``data_term=images``) over a bracket of weights, the best chosen
-with the truth (lowest error over every weight and evaluation: the harshest comparison for nerif). Writes
-``images.json`` and ``images.md`` (the table, and each target of the issue met or missed) under ``--out``.
+and with its default (``data_term=auto``: the images with the flow term beside them); CGLS-TV two-step (the
+flow's deflections) and unified (the images' linearised equations, ``data_term=images``) over a bracket of
+weights, the best chosen with the truth (lowest error over every weight and evaluation: the harshest comparison
+for nerif). Writes ``images.json`` and ``images.md`` (the table, and each target of the issue met or missed)
+under ``--out``.
 """
 from __future__ import annotations
 
@@ -120,17 +121,19 @@ def report(rows: dict) -> str:
               / cap["nerif, flow"]["sigma"], 0.7)
         voxel = [v["sigma"] for k, v in cap.items() if k.startswith("cgls")]
         if voxel:
-            check("independent capture: sigma error, default / the better voxel solver", cap["nerif, default"]["sigma"]
-                  / min(voxel), 0.8)
+            check("independent capture: sigma error, default / the better voxel solver",
+                  cap["nerif, default"]["sigma"] / min(voxel), 0.8)
     glow, plain = table.get("glow and drift", {}), table.get("realistic, seed 0", {})
     if "nerif, default" in glow and "nerif, default" in plain:
-        check("with glow and drift / without (default)", glow["nerif, default"]["T"] / plain["nerif, default"]["T"], 1.2)
+        check("with glow and drift / without (default)", glow["nerif, default"]["T"] / plain["nerif, default"]["T"],
+              1.2)
     return "\n".join(lines) + "\n\n" + "\n".join(checks) + "\n"
 
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scenes", nargs="+", default=["realistic", "axisymmetric", "plume", "glow", "capture", "multicam"])
+    ap.add_argument("--scenes", nargs="+",
+                    default=["realistic", "axisymmetric", "plume", "glow", "capture", "multicam"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     ap.add_argument("--only", choices=("all", "nerif", "cgls"), default="all")
     run_arguments(ap, "benchmarks/results/images")

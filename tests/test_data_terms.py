@@ -148,7 +148,8 @@ def test_on_a_tiny_capture_training_on_the_images_ends_closer_to_the_truth_than_
     np.savez(root / "volume.npz", T=scene.truth_T)
     error = {}
     for term in ("flow", "auto"):
-        run_cfg = tiny_config("data=capture", f"data.root={root}", "data.binning=8", f"data.truth={root / 'volume.npz'}",
-                              "train.iterations=200", "train.eval_every=200", f"data_term={term}", synthetic=False)
+        run_cfg = tiny_config("data=capture", f"data.root={root}", "data.binning=8",
+                              f"data.truth={root / 'volume.npz'}", "train.iterations=200", "train.eval_every=200",
+                              f"data_term={term}", synthetic=False)
         error[term] = run(run_cfg, tmp_path / term)["sigma_relative_error"]
     assert error["auto"] < 0.95 * error["flow"], error

@@ -98,15 +98,15 @@ class SignalsInAFinalizer(Halving):
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGUSR2])
 def test_a_signal_that_lands_in_a_finalizer_still_stops_the_run_after_its_step(tmp_path, signum):
-    before = signal.signal(signum, signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL)
+    own = signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL
+    before = signal.signal(signum, own)
     try:  # as in a terminal (a shell's background job ignores SIGINT, and so does the run)
         s = SignalsInAFinalizer(signum, 4, iterations=10)
         with pytest.raises(Interrupted) as e:
             s.fit(checkpoint_every=100, checkpoint=tmp_path / "ck.pt", progress=False)
         assert e.value.signal_name == signal.Signals(signum).name
         assert s.iteration == 5 and torch.load(tmp_path / "ck.pt", weights_only=False)["iteration"] == 5
-        expected = signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL
-        assert signal.getsignal(signum) is expected  # the handler is given back
+        assert signal.getsignal(signum) is own  # the handler is given back
     finally:
         signal.signal(signum, before)
 
