@@ -52,11 +52,11 @@ def scenes(names: list[str], seeds: list[int], out_dir: Path) -> dict[str, str]:
         elif name == "glow":
             out["glow and drift"] = "data.sensing=realistic data.sensor.luminosity=0.3 data.sensor.gain_drift=0.1"
         elif name == "capture":
-            out["independent capture"] = (f"data=capture data.root={CAPTURE} data.binning=4 "
+            out["independent capture"] = (f"data=capture data.root={CAPTURE} "
                                           f"data.truth={CAPTURE / 'volume.npz'}")
         elif name == "multicam":
             root = multicam_folder(out_dir / "multicam", False)
-            out["independent multicam capture"] = (f"data=capture data.root={root} data.binning=4 "
+            out["independent multicam capture"] = (f"data=capture data.root={root} "
                                                     f"data.truth={MULTICAM / 'volume.npz'}")
         else:
             raise SystemExit(f"unknown scene '{name}': realistic, axisymmetric, plume, glow, capture, multicam")

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from nerif.app import resolve_device, resolve_threads, retain_freed_memory
+from nerif.app import resolve_device, retain_freed_memory
+from nerif.threads import resolve_threads
 from nerif.configs import compose, group
 from nerif.data import DATASETS
 from nerif.masks import MASKS

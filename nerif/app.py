@@ -5,7 +5,6 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import logging
-import os
 import platform
 import time
 from pathlib import Path
@@ -20,6 +19,7 @@ from nerif.memory import check_memory
 from nerif.reconstruct import reconstruct, resuming
 from nerif.sequence import run_sequence
 from nerif.solvers.base import check_train
+from nerif.threads import ThreadTuner, resolve_threads, usable_cores
 
 DEVICES = "auto, cpu, cuda or cuda:N"
 log = logging.getLogger(__name__)
@@ -43,24 +43,6 @@ def resolve_device(name: str) -> torch.device:
     return dev
 
 
-def resolve_threads(setting, parallel_jobs: int = 1) -> int:
-    """CPU threads of a run: ``auto`` = torch's own count (the cores, or ``OMP_NUM_THREADS``) for a job alone,
-    the cores this process may use shared evenly by ``parallel_jobs`` jobs running at once (at least 1); or a
-    positive number; one sentence otherwise."""
-    if setting == "auto":
-        if parallel_jobs <= 1:
-            return torch.get_num_threads()
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-        return max(1, cores // parallel_jobs)
-    if isinstance(setting, bool) or not isinstance(setting, int) or setting < 1:
-        raise ValueError(f"threads={setting}: auto or a number of CPU threads (at least 1)")
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if setting > cores:  # more threads than cores only wait on each other (38x slower with 1000 on 2 cores)
-        log.warning("threads=%d: this process may use %d core(s); running with %d", setting, cores, cores)
-        return cores
-    return setting
-
-
 def retain_freed_memory() -> bool:
     """Let the process keep the memory its tensors free (glibc: blocks up to 32 MiB from the heap, which is never
     trimmed), instead of handing it back to the system and faulting it in again on the next step. A training step
@@ -82,19 +64,25 @@ def retain_freed_memory() -> bool:
 def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     """Reconstruct the configured scene into ``out_dir``, or every frame of a time series (``data.frames``;
     :func:`nerif.sequence.run_sequence`); returns the final metrics. ``parallel_jobs``: jobs of a multirun
-    running at once on this machine (``threads=auto`` shares the cores among them)."""
+    running at once on this machine (``threads=auto`` shares the cores among them; a job alone keeps the fastest
+    count under the machine's load, :class:`nerif.threads.ThreadTuner`)."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     check_complete(cfg)
     check_train(group(cfg, "train"), cfg.seed)
     device = resolve_device(cfg.device)
     check_memory(cfg, device)
-    torch.set_num_threads(resolve_threads(cfg.threads, parallel_jobs))
+    threads = resolve_threads(cfg.threads, parallel_jobs)
+    torch.set_num_threads(threads)
+    tuner = None
+    if cfg.threads == "auto" and parallel_jobs <= 1 and device.type == "cpu":
+        tuner = ThreadTuner(usable_cores(), torch.set_num_threads)
+        tuner.start(threads)
     retain_freed_memory()
     check_writable(out_dir)
     continuing = cfg.train.resume is not None or resuming(cfg.train.resume)
     with run_folder(out_dir, continuing):
         frames = frames_of(group(cfg, "data"))  # a time series is checked whole here, before any work
         if frames is not None:
-            return run_sequence(cfg, out_dir, device, frames)
-        return reconstruct(cfg, out_dir, device, t_start=t_start)
+            return run_sequence(cfg, out_dir, device, frames, threads=tuner)
+        return reconstruct(cfg, out_dir, device, t_start=t_start, threads=tuner)

@@ -37,13 +37,38 @@ def checkpoint_to_resume(setting, own: Path) -> Optional[Path]:
     return Path(setting) if setting else None
 
 
+class WarningRecords(logging.Handler):
+    """Every warning nerif logs while installed (on the ``nerif`` logger), for ``metrics.json`` and the summary
+    line: what the log says, a run's results say too."""
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+    def __enter__(self) -> "WarningRecords":
+        logging.getLogger("nerif").addHandler(self)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        logging.getLogger("nerif").removeHandler(self)
+
+
 def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Optional[int] = None,
                 start_from: Optional[Path] = None, t_start: Optional[float] = None, about: Optional[dict] = None,
-                resume_hint: Optional[str] = None) -> dict:
+                resume_hint: Optional[str] = None, threads=None) -> dict:
     """One reconstruction (of ``frame`` of a time series, or of the steady scene) into ``out_dir``: build the
     parts, train (from the state of ``start_from``, a checkpoint of the previous frame, unless the run resumes
     its own), write every output (``about``: entries added to its ``metrics.json``). Returns the final metrics.
-    ``resume_hint``: how to continue after an interruption (default: from this run's checkpoint)."""
+    ``resume_hint``: how to continue after an interruption (default: from this run's checkpoint). ``threads``: a
+    :class:`nerif.threads.ThreadTuner` that times the training steps to keep the fastest CPU thread count."""
+    with WarningRecords() as records:
+        return _reconstruct(cfg, out_dir, device, frame, start_from, t_start, about, resume_hint, threads, records)
+
+
+def _reconstruct(cfg, out_dir, device, frame, start_from, t_start, about, resume_hint, threads, records) -> dict:
     t_start = time.perf_counter() if t_start is None else t_start
     torch.manual_seed(cfg.seed)
     # every check that can fail happens here, before any training; the solver checks its settings before any data
@@ -69,10 +94,10 @@ def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Opt
     from torch.utils.tensorboard import SummaryWriter
 
     writer = SummaryWriter(log_dir=str(out_dir / "tensorboard"))
-    losses: list[tuple[int, float]] = []
+    losses: list[tuple[int, dict]] = []
 
     def on_step(it: int, terms: dict) -> None:
-        losses.append((it, terms["loss"]))
+        losses.append((it, terms))
         if it % 10 == 0:
             for k, v in terms.items():
                 writer.add_scalar(f"train/{k}", v, it)
@@ -91,15 +116,16 @@ def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Opt
     try:
         solver.fit(checkpoint_every=tc.checkpoint_every, checkpoint_every_s=tc.checkpoint_every_s,
                    checkpoint=checkpoint, on_eval=on_eval, on_step=on_step, progress=tc.progress,
-                   resume_hint=resume_hint)
+                   resume_hint=resume_hint, threads=threads)
     finally:
         writer.close()
 
     try:
         metrics = write_outputs(solver, scene, out_dir, losses)
-        metrics["warnings"] = rig_warnings + metrics.get("warnings", [])
+        metrics["warnings"] = list(dict.fromkeys(rig_warnings + metrics.get("warnings", []) + records.messages))
         metrics.update(setup_time_s=setup_s, cpu_threads=torch.get_num_threads(),
                        device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
+        metrics.update(threads.report() if threads is not None else {})
         if device.type == "cuda":
             metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
         metrics["total_time_s"] = time.perf_counter() - t_start

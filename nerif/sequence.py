@@ -69,10 +69,10 @@ def check_sequence(cfg: DictConfig) -> None:
                          "train.resume=auto hydra.run.dir=<the series' folder>")
 
 
-def run_sequence(cfg: DictConfig, out_dir: Path, device: torch.device, frames: list[Frame]) -> dict:
+def run_sequence(cfg: DictConfig, out_dir: Path, device: torch.device, frames: list[Frame], threads=None) -> dict:
     """Reconstruct ``frames`` in turn into ``out_dir/frame_KKKK/``, each from the previous frame's final state
     (``sequence.warm_start``); write the series' outputs (also when interrupted, for the finished frames).
-    Returns the series' metrics."""
+    Returns the series' metrics. ``threads``: the run's :class:`nerif.threads.ThreadTuner`, if any."""
     t_start = time.perf_counter()
     check_sequence(cfg)
     again = resuming(cfg.train.resume)
@@ -97,7 +97,8 @@ def run_sequence(cfg: DictConfig, out_dir: Path, device: torch.device, frames: l
                 m = reconstruct(frame_config(cfg, warm), folder, device, frame=f.index,
                                 start_from=previous if warm else None,
                                 about={"frame": f.index, "time_s": f.time_s, "warm_start": warm},
-                                resume_hint=f"the same command and train.resume=auto hydra.run.dir={out_dir}")
+                                resume_hint=f"the same command and train.resume=auto hydra.run.dir={out_dir}",
+                                threads=threads)
             rows.append({**{k: m.get(k) for k in FINAL_KEYS}, "frame": f.index, "time_s": f.time_s,
                          "warm_start": bool(m.get("warm_start")), "folder": folder.name})
             unit = m.get("deflection_unit", unit)

@@ -1,4 +1,10 @@
-"""A tiny scene that trains in seconds on a CPU, and building a solver from a config as the app does."""
+"""A tiny scene that trains in seconds on a CPU, building a solver from a config as the app does, and the project's
+shared captures where they are."""
+import os
+from pathlib import Path
+
+import pytest
+
 from nerif.configs import compose, group
 from nerif.solvers import SOLVERS
 
@@ -20,3 +26,16 @@ def solver(cfg, scene, masks=None):
     from nerif.masks import Masks
 
     return SOLVERS.build(group(cfg, "solver")).setup(scene, masks if masks is not None else Masks())
+
+
+SHARED = Path(os.environ.get("NERIF_SHARED", Path(__file__).resolve().parents[2] / "shared")) / "data"
+
+
+def shared_data(name: str) -> Path:
+    """The folder ``name`` of the project's shared data (``../shared/data`` beside the clone, or
+    ``$NERIF_SHARED/data``); where it is not there (a fresh clone), the test is skipped with one line saying so."""
+    path = SHARED / name
+    if not path.is_dir():
+        pytest.skip(f"the project's shared data are not beside this clone ({SHARED}; set NERIF_SHARED to the folder "
+                    "holding data/): tests of the shared captures skipped")
+    return path

@@ -1,5 +1,4 @@
 """Calibrated cameras (issue 29): OpenCV's intrinsics, distortion and pose, read from a version-3 capture."""
-import os
 from pathlib import Path
 
 import cv2
@@ -9,29 +8,34 @@ import yaml
 
 from nerif.data.capture import RIG_FILE, read_rig, rig_cameras
 from nerif.geometry import ProbeBox, rays_in_box
+from tests.helpers import shared_data
 
-SHARED = Path(os.environ.get("NERIF_SHARED", Path(__file__).resolve().parents[2] / "shared")) / "data"
-MULTICAM = SHARED / "independent_capture_bunsen_multicam"
 RIG = {"format": "nerif-capture", "version": 3, "calibration": "calibration.yml",
        "probe": {"shape": [60, 100, 60], "voxel_mm": 1.0}, "ambient": {"T0": 296.15, "n0": 1.00027}, "T_max": 2000.0,
        "heldout": [9]}
 
 
+def multicam() -> Path:
+    """``../shared/data/independent_capture_bunsen_multicam`` (the test is skipped where it is not there)."""
+    return shared_data("independent_capture_bunsen_multicam")
+
+
 def folder(tmp_path: Path, edit=None) -> Path:
-    tmp_path.mkdir(exist_ok=True)
     """The multicam capture with the issue's version-3 rig.yaml beside its files (calibration edited by ``edit``)."""
-    for f in MULTICAM.iterdir():
+    tmp_path.mkdir(exist_ok=True)
+    source = multicam()
+    for f in source.iterdir():
         if f.suffix == ".png" or (f.name == "calibration.yml" and edit is None):
             (tmp_path / f.name).symlink_to(f)
     if edit is not None:
-        text = (MULTICAM / "calibration.yml").read_text()
+        text = (source / "calibration.yml").read_text()
         (tmp_path / "calibration.yml").write_text(edit(text))
     (tmp_path / RIG_FILE).write_text(yaml.safe_dump(RIG))
     return tmp_path
 
 
 def test_a_pixels_ray_is_opencvs_and_projects_back_onto_the_pixel(tmp_path):
-    fs = cv2.FileStorage(str(MULTICAM / "calibration.yml"), cv2.FILE_STORAGE_READ)
+    fs = cv2.FileStorage(str(multicam() / "calibration.yml"), cv2.FILE_STORAGE_READ)
     full, _ = rig_cameras(read_rig(folder(tmp_path)), 1)
     rng = np.random.default_rng(0)
     for k, cam in enumerate(full):
@@ -91,9 +95,9 @@ def test_the_keys_the_data_readme_lists_are_the_keys_nerif_reads():
 
     from nerif.data.capture import CALIBRATION_KEYS
 
-    listed = set(re.findall(r"camera_KK_(\w+)", (MULTICAM / "README.md").read_text()))
+    listed = set(re.findall(r"camera_KK_(\w+)", (multicam() / "README.md").read_text()))
     assert listed == set(CALIBRATION_KEYS)
-    fs = cv2.FileStorage(str(MULTICAM / "calibration.yml"), cv2.FILE_STORAGE_READ)
+    fs = cv2.FileStorage(str(multicam() / "calibration.yml"), cv2.FILE_STORAGE_READ)
     assert all(not fs.getNode(f"camera_09_{k}").empty() for k in CALIBRATION_KEYS)
 
 
@@ -142,7 +146,7 @@ def test_a_capture_written_through_a_calibrated_rig_reads_back_its_cameras_and_r
 
 def test_a_cameras_list_in_the_rig_file_is_the_calibration_file(tmp_path):
     """Version 3 reads the cameras from ``rig.yaml``'s own ``cameras`` list as from an OpenCV calibration file."""
-    fs = cv2.FileStorage(str(MULTICAM / "calibration.yml"), cv2.FILE_STORAGE_READ)
+    fs = cv2.FileStorage(str(multicam() / "calibration.yml"), cv2.FILE_STORAGE_READ)
     cameras = []
     for k in range(10):
         get = lambda key: fs.getNode(f"camera_{k:02d}_{key}")  # noqa: E731
@@ -155,7 +159,7 @@ def test_a_cameras_list_in_the_rig_file_is_the_calibration_file(tmp_path):
                         "background_distance_mm": get("background_distance_mm").real()})
     listed = tmp_path / "listed"
     listed.mkdir()
-    for f in MULTICAM.glob("*.png"):
+    for f in multicam().glob("*.png"):
         (listed / f.name).symlink_to(f)
     rig = {k: v for k, v in RIG.items() if k != "calibration"}
     (listed / RIG_FILE).write_text(yaml.safe_dump({**rig, "cameras": cameras}))

@@ -61,7 +61,9 @@ def test_train_on_a_capture_with_a_held_out_view(written, tmp_path, mask):
     assert np.isfinite(m["heldout_psnr_db"]) and np.isfinite(m["heldout_displacement_psnr_db"])
     assert "temperature_rmse_K" not in m  # no ground truth, no temperature error claimed
     assert m["ambient_faces"]  # auto never leaves the level unpinned (here the flow's smoothing inflates the masks)
-    assert (tmp_path / "heldout" / "view00.png").is_file() and (tmp_path / "reconstruction.npz").is_file()
+    number = int(h.cameras[0].name.split()[1])  # "camera 4 (160.0 deg)": the figure is named by its camera
+    assert [p.name for p in (tmp_path / "heldout").iterdir()] == [f"camera{number:02d}.png"]
+    assert (tmp_path / "reconstruction.npz").is_file()
 
 
 def _variant(written, tmp_path, edit_rig=None, edit_files=None):

@@ -145,3 +145,15 @@ def test_a_double_table_takes_the_tensor_path():
 def test_an_unknown_kernel_is_refused():
     with pytest.raises(ValueError, match="hash kernel must be auto, torch, triton or cpp"):
         HashGrid(kernel="cuda")
+
+
+def test_each_python_environment_keeps_its_own_kernel_build(monkeypatch, tmp_path):
+    """Issue 35: two environments on one machine rebuilt each other's kernel in torch's shared extension folder."""
+    monkeypatch.setenv("TORCH_EXTENSIONS_DIR", str(tmp_path))
+    monkeypatch.setattr("sys.prefix", "/envs/a")
+    a = hash_kernel.build_directory()
+    monkeypatch.setattr("sys.prefix", "/envs/b")
+    b = hash_kernel.build_directory()
+    assert a != b and a.parent == b.parent == tmp_path and a.is_dir() and b.is_dir()
+    monkeypatch.setattr("sys.prefix", "/envs/a")
+    assert hash_kernel.build_directory() == a  # the same environment finds its own build again

@@ -2,7 +2,6 @@
 import pytest
 import torch
 
-from nerif.app import resolve_threads
 from nerif.configs import compose
 from nerif.memory import check_memory, estimates
 
@@ -37,10 +36,3 @@ def test_a_run_that_cannot_fit_is_refused_naming_the_key(monkeypatch, override, 
     with pytest.raises(ValueError, match=f"GiB free on cpu: {key}$"):
         check_memory(compose([override]), torch.device("cpu"))
 
-
-def test_more_threads_than_cores_are_capped(caplog):
-    import os
-
-    cores = len(os.sched_getaffinity(0))
-    assert resolve_threads(1000) == cores and "threads=1000" in caplog.text
-    assert resolve_threads(1) == 1

@@ -31,8 +31,11 @@ def test_without_a_truth_only_the_reconstruction_is_shown():
 
 def test_curves_heldout_and_sensing_figures_render(tmp_path):
     hist = [{"iteration": i, "wall_time_s": i * 0.1, "temperature_rmse_K": 100.0 / i} for i in (1, 2, 3)]
-    fig = curves_figure(hist, [(1, 1.0), (2, 0.5)])
+    fig = curves_figure(hist, [(i, {"loss": 1.0 / i, "loss_discrete": 0.9 / i}) for i in (1, 2, 3)], images_from=2)
     assert fig.axes[1].get_ylabel() == "temperature_rmse_K"
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]  # each term, the data term in two parts
+    assert labels == ["total", "data term (discrete gradients): flow deflections",
+                      "data term (discrete gradients): images + flow"]
     obs = np.ones((8, 6, 2))
     fig = heldout_figure(obs, obs * 0.5, "px", "held out")
     panels = [a for a in fig.axes if a.images]

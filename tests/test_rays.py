@@ -39,3 +39,16 @@ def test_a_rotation_that_is_not_one_is_refused():
     R = look_at_origin(np.array([0.0, 0.0, 800.0])) @ np.diag([-1.0, 1.0, 1.0])  # a reflection
     with pytest.raises(ValueError, match="camera 3: its rotation is not a rotation"):
         Camera(np.array([0.0, 0.0, 800.0]), R, 112.4, 0.8, 18, 32, 32.0, 1600, 105, name="camera 3")
+
+
+@pytest.mark.parametrize("voxel_mm, binning", [(1.0, 4), (0.5, 2), (3.0, 10), (0.1, 1)])
+def test_the_automatic_binning_puts_about_one_ray_per_voxel(voxel_mm, binning):
+    """A camera 800 mm from the probe centre, focused on a background 800 mm behind it, images 1 mm there onto
+    f_img / (pitch 800 mm) = 112.37 / 32 = 3.51 pixels of 40 um (f_img = 1 / (1/105 - 1/1600) mm); the binning is the
+    divisor of 360 and 640 nearest in ratio to the pixels a voxel spans: 3.51 -> 4, 1.76 -> 2, 10.5 -> 10, 0.35 -> 1."""
+    from nerif.geometry import ray_binning
+
+    cams = arc_rig(angles_deg=[0.0, 60.0, 120.0], distance_mm=800.0, focal_mm=105.0, width_px=360, height_px=640,
+                   pitch_um=40.0, background_behind_mm=800.0, f_number=32.0, binning=1)
+    assert cams[0].pixels_per_mm(np.zeros(3)) == pytest.approx(1 / (1 / 105 - 1 / 1600) / 32.0, rel=1e-9)
+    assert ray_binning(cams, ProbeBox((10, 10, 10), voxel_mm)) == binning

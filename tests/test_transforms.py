@@ -1,7 +1,4 @@
 """The paper's dataset format: geometry and channel order of the importer, on the authors' Phantom 1 data."""
-import os
-from pathlib import Path
-
 import numpy as np
 import pytest
 import torch
@@ -10,18 +7,23 @@ from nerif.data.transforms import load_views, optics, read_frame, read_split, re
 from nerif.geometry import ProbeBox
 from nerif.masks.backprojection import back_project
 from nerif.physics import Ambient
+from tests.helpers import shared_data
 
-ROOT = Path(os.environ.get("NERIF_SHARED", Path(__file__).resolve().parents[2] / "shared")) / "data" / "nirbos_phantom1"
 BOX = ProbeBox((140, 294, 140), 0.5)
 PROBE = {"shape": [140, 294, 140], "voxel_mm": 0.5}
 
 
 @pytest.fixture(scope="module")
-def frames():
+def phantom1():
+    """The authors' Phantom 1 data (``../shared/data/nirbos_phantom1``)."""
+    return shared_data("nirbos_phantom1")
+
+
+@pytest.fixture(scope="module")
+def frames(phantom1):
     """The two val views at full resolution, as the importer reads them."""
-    assert ROOT.is_dir(), f"the shared data {ROOT} is missing (set NERIF_SHARED to the folder holding data/)"
-    meta = read_split(ROOT, "val")
-    return [read_frame(ROOT, "val", meta, k, optics()) for k in range(len(meta["frames"]))]
+    meta = read_split(phantom1, "val")
+    return [read_frame(phantom1, "val", meta, k, optics()) for k in range(len(meta["frames"]))]
 
 
 def test_probe_centre_projects_inside_the_masks(frames):
@@ -68,8 +70,8 @@ def test_deflections_point_out_of_the_hot_flame(frames):
         assert score > 0.2, (cam.name, score)
 
 
-def test_scene_from_the_importer():
-    scene = transforms(str(ROOT), PROBE, 1100.0, 1.00007253, sigma_prior=None, binning=8, heldout_split="val")
+def test_scene_from_the_importer(phantom1):
+    scene = transforms(str(phantom1), PROBE, 1100.0, 1.00007253, sigma_prior=None, binning=8, heldout_split="val")
     assert scene.n_views == 12 and scene.heldout.n_views == 2
     assert not scene.ambient.temperature_known and scene.ambient.delta_thre == 1.0
     assert scene.perpendicular_only and scene.mask_images[0].shape == (160, 90)
@@ -84,19 +86,19 @@ def test_scene_from_the_importer():
     assert int(row.min()) * 8 >= 99 and (int(row.max()) + 1) * 8 <= 99 + 1081
 
 
-def test_training_views_held_out_as_novel_views():
-    scene = transforms(str(ROOT), PROBE, 1100.0, 1.00007253, sigma_prior=None, binning=8, heldout_split=None, heldout_views=[3])
+def test_training_views_held_out_as_novel_views(phantom1):
+    scene = transforms(str(phantom1), PROBE, 1100.0, 1.00007253, sigma_prior=None, binning=8, heldout_split=None, heldout_views=[3])
     assert scene.n_views == 11 and scene.heldout.n_views == 1
     assert np.allclose(scene.heldout.cameras[0].position, [-565.685, 0.0, -565.685], atol=1e-3)  # 45 degrees
     assert len(scene.mask_images) == 11
     with pytest.raises(ValueError, match="heldout_split=null"):
-        transforms(str(ROOT), PROBE, 1100.0, 1.00007253, sigma_prior=None, binning=8, heldout_views=[3])
+        transforms(str(phantom1), PROBE, 1100.0, 1.00007253, sigma_prior=None, binning=8, heldout_views=[3])
 
 
-def test_masks_back_project_onto_the_authors_3d_mask():
-    scene = load_views(ROOT, "train", BOX, Ambient(1100.0, 1.00007253, None), optics(), binning=8)
+def test_masks_back_project_onto_the_authors_3d_mask(phantom1):
+    scene = load_views(phantom1, "train", BOX, Ambient(1100.0, 1.00007253, None), optics(), binning=8)
     ours = back_project(BOX, scene.cameras, scene.mask_images)
-    theirs = reference_mask3d(str(ROOT), BOX)
+    theirs = reference_mask3d(str(phantom1), BOX)
     iou = (ours & theirs).sum() / (ours | theirs).sum()
     assert iou > 0.8, iou
 
@@ -118,15 +120,15 @@ def test_bad_dataset_folders(tmp_path):
     ({"frames": [{"transform_matrix": [[1, 0, 0, 0]] * 4}]}, r"frame 0 lacks file_path, mask_file_path"),
     ("{", r"transforms_train.json is not valid JSON \(line 1\)"),
 ])
-def test_a_bad_transforms_file_is_one_sentence_naming_it(tmp_path, edit, message):
+def test_a_bad_transforms_file_is_one_sentence_naming_it(phantom1, tmp_path, edit, message):
     """Issue 28: image_min == image_max trained on constant deflections; a negative fl_x gave 4.2 against 0.73; a
     truncated file, frames as a dict or without file_path were tracebacks; a wrong w was blamed on the binning."""
     import json
 
     for split in ("train", "val", "test"):
-        meta = json.loads((ROOT / f"transforms_{split}.json").read_text())
+        meta = json.loads((phantom1 / f"transforms_{split}.json").read_text())
         text = edit if isinstance(edit, str) else json.dumps({**meta, **edit})
         (tmp_path / f"transforms_{split}.json").write_text(text)
-        (tmp_path / split).symlink_to(ROOT / split)
+        (tmp_path / split).symlink_to(phantom1 / split)
     with pytest.raises(ValueError, match=message):
         transforms(str(tmp_path), PROBE, 1100.0, 1.00007253, sigma_prior=None)

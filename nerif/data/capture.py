@@ -1,73 +1,12 @@
-"""BOS captures as an experimentalist records them: a folder of background images and a rig file.
-
-Folder layout (``rig.yaml`` format version 2; version 1, the same without ``frames``, is read as well)::
-
-    rig.yaml                 # the rig, below
-    distorted_00.png ...     # one image per view, through the flow (8- or 16-bit greyscale, all alike)
-    reference_00.png ...     # the background without flow: one per view, or one shared file
-    frame_0000/distorted_00.png ...   # a time series instead: one image per view and frame (``frames`` below)
-
-``rig.yaml``::
-
-    format: nerif-capture
-    version: 2
-    camera:
-      focal_mm: 105.0                  # lens focal length
-      pitch_um: 20.0                   # pixel pitch
-      sensor_px: [720, 1280]           # width, height of every image
-      f_number: 32.0
-      camera_to_centre_mm: 800.0       # camera to the probe centre (the burner axis)
-      camera_to_background_mm: 1600.0  # camera to the background plane (the focus)
-    views:
-      angles_deg: [0.0, 15.0, ...]     # camera position around the burner axis (y), from +z towards +x;
-                                       # a rotating burner turned by +a is a camera at -a
-      images: [distorted_00.png, ...]  # one per angle (one steady state), or instead:
-      references: reference.png        # one shared file, or a list (one per view), for every frame
-    frames:                            # a time series (instead of views.images): one entry per frame, in time order
-      - time_s: 0.0
-        images: [frame_0000/distorted_00.png, ...]   # one per angle, all taken at time_s
-      - ...
-    roi_px: [0, 0, 720, 1280]          # region of interest: x, y (0-based, top left), width, height [px]
-    probe:                             # reconstruction grid, centred on the burner axis at the camera height
-      shape: [36, 50, 36]              # nx, ny, nz (y vertical)
-      voxel_mm: 2.0
-    ambient: {T0: 296.15, n0: 1.00027}
-    T_max: 2000.0                      # optional: hottest expected temperature [K] (sets the field's scale)
-    temperature_range_K: [296.15, 2000.0]  # optional: coldest and hottest gas expected (the field's prior;
-                                       # default: ambient to T_max, i.e. a flame hotter than its surroundings)
-    heldout: [11]                      # optional: views never trained on (default: the last)
-
-Version 3: several calibrated cameras, each placed by hand, with its own lens (OpenCV's calibration)::
-
-    format: nerif-capture
-    version: 3
-    calibration: calibration.yml       # cv2.FileStorage file beside rig.yaml: cameras, images, background distances
-    probe: {shape: [60, 100, 60], voxel_mm: 1.0}
-    ambient: {T0: 296.15, n0: 1.00027}
-    T_max: 2000.0                      # optional, as above; so are roi_px, temperature_range_K, heldout, and
-    f_number: 32.0                     # optional: the lenses' f-number (thin rays do not use it)
-
-``calibration.yml`` holds ``n_cameras`` and per camera ``KK`` (00, 01, ...): ``camera_KK_image``,
-``camera_KK_reference`` (file names), ``camera_KK_image_size`` ([width, height] px), ``camera_KK_camera_matrix``
-(3 x 3 K, OpenCV's pixel convention), ``camera_KK_dist_coeffs`` ((k1, k2, p1, p2, k3)), ``camera_KK_rvec`` and
-``camera_KK_tvec`` (world to camera, as ``cv2.projectPoints`` takes them; mm; the world is the probe's frame:
-origin at its centre, y up), ``camera_KK_pixel_pitch_mm`` and ``camera_KK_background_distance_mm`` (camera centre
-to its background plane, along its axis). Instead of ``calibration``, a ``cameras`` list in ``rig.yaml`` holds the
-same per camera (without the ``camera_KK_`` prefix)::
-
-    cameras:
-      - {image: distorted_00.png, reference: reference_00.png, image_size: [360, 640],
-         camera_matrix: [[2814.2, 0, 168.5], [0, 2818.1, 329.5], [0, 0, 1]], dist_coeffs: [-0.07, 0.14, 0, 0, 0],
-         rvec: [-3.096, -0.045, 0.085], tvec: [-1.57, -3.50, 835.1], pixel_pitch_mm: 0.04,
-         background_distance_mm: 1519.9}
-      - ...
-
-A pixel's ray leaves from its undistorted position; images, flow and masks stay on the distorted pixel grid.
+"""BOS captures as an experimentalist records them: a folder of background images and a rig file, ``rig.yaml``
+(format versions 1-3: one camera model on an arc, a time series, or OpenCV-calibrated cameras). The format, with
+every key explained, is in ``docs/captures.md``.
 
 The pipeline per view: optical flow between distorted and reference image (``flow`` config), block means to
-the processing grid (``binning``), displacement -> deflection through the rig geometry, rays inside the ROI that
-cross the probe box. Everything that can be wrong with the folder is checked before the flow runs, for every
-frame of a time series before the first frame's flow.
+the processing grid (``binning``; ``auto``: about one ray per voxel across), displacement -> deflection through the
+rig geometry, rays inside the ROI that cross the probe box. A pixel's ray leaves from its undistorted position;
+images, flow and masks stay on the distorted pixel grid. Everything that can be wrong with the folder is checked
+before the flow runs, for every frame of a time series before the first frame's flow.
 """
 from __future__ import annotations
 
@@ -81,7 +20,7 @@ import torch
 import yaml
 
 from nerif.data.frames import FRAMES, Frame, pick_frames
-from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest
+from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest, resolve_binning
 from nerif.data.scene import DATASETS, Scene, ViewImages, heldout_views, scene_from_images
 from nerif.geometry import Camera, ProbeBox, arc_rig, rays_in_box
 from nerif.io.export import atomic_write, write_png
@@ -355,20 +294,20 @@ def read_images(paths: list[Path], sensor_px, keep: bool = True) -> list[np.ndar
     return out
 
 
-def rig_cameras(rig: dict, binning: int = 1):
-    """The rig's cameras (full sensor) from its file, and the same read out with ``binning``."""
+def rig_cameras(rig: dict, binning=1, box: Optional[ProbeBox] = None):
+    """The rig's cameras (full sensor) from its file, and the same read out with ``binning`` (``auto``: about one
+    ray per voxel of ``box`` across, :func:`nerif.geometry.ray_binning`)."""
     c = rig["camera"]
     w, h = (int(x) for x in c["sensor_px"])
-    if binning < 1 or w % binning or h % binning:
-        raise ValueError(f"data.binning={binning} must divide the sensor size {w} x {h} px")
     if "calibrated" in rig:
         full = rig["calibrated"]
-        return full, [cam.binned(binning) if binning > 1 else cam for cam in full]
-    full = arc_rig(angles_deg=[float(a) for a in rig["views"]["angles_deg"]],
-                   distance_mm=float(c["camera_to_centre_mm"]), focal_mm=float(c["focal_mm"]), width_px=w, height_px=h,
-                   pitch_um=float(c["pitch_um"]),
-                   background_behind_mm=float(c["camera_to_background_mm"]) - float(c["camera_to_centre_mm"]),
-                   f_number=float(c["f_number"]), binning=1)
+    else:
+        full = arc_rig(angles_deg=[float(a) for a in rig["views"]["angles_deg"]],
+                       distance_mm=float(c["camera_to_centre_mm"]), focal_mm=float(c["focal_mm"]), width_px=w,
+                       height_px=h, pitch_um=float(c["pitch_um"]),
+                       background_behind_mm=float(c["camera_to_background_mm"]) - float(c["camera_to_centre_mm"]),
+                       f_number=float(c["f_number"]), binning=1)
+    binning = resolve_binning(binning, full, box, f"the sensor size {w} x {h} px")
     return full, [cam.binned(binning) if binning > 1 else cam for cam in full]
 
 
@@ -413,13 +352,14 @@ def capture_frames(root: str, frames=None, **_) -> Optional[list[Frame]]:
 
 
 @DATASETS.register("capture")
-def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = None, frames=None,
+def capture(root: str, flow: dict, binning="auto", heldout: Optional[list] = None, frames=None,
             frame: Optional[int] = None, truth: Optional[str] = None, device: str = "cpu") -> Scene:
     """A capture folder -> scene of the training views, with the held-out views as ``scene.heldout``.
 
     Args:
         root: the capture folder. flow: a :data:`nerif.sensing.flow.FLOW` config.
-        binning: b x b sensor pixels averaged into one ray (the processing grid).
+        binning: b x b sensor pixels averaged into one ray (the processing grid); ``auto``: about one ray per
+            voxel across at the probe (:func:`nerif.geometry.ray_binning`), logged.
         heldout: views never trained on (overrides the rig file's ``heldout``; default: the last view).
         frames: the frames of a time series (:func:`capture_frames`); ``frame``: the one to build (None: the
             first of the folder).
@@ -433,10 +373,10 @@ def capture(root: str, flow: dict, binning: int = 8, heldout: Optional[list] = N
     if not 0 <= frame < len(rig_frames(rig)):
         raise ValueError(f"frame {frame}: {root / RIG_FILE} lists {len(rig_frames(rig))} frame(s)")
     distorted, references = capture_files(root, rig, frame)
-    full, cameras = rig_cameras(rig, binning)
-    valid = roi_mask(rig, root, binning)
     box = ProbeBox(tuple(int(n) for n in _need(rig["probe"], "shape", "rig probe")),
                    float(_need(rig["probe"], "voxel_mm", "rig probe")))
+    full, cameras = rig_cameras(rig, binning, box)
+    valid = roi_mask(rig, root, cameras[0].binning)
     amb = rig["ambient"]
     ambient = Ambient(float(_need(amb, "T0", "rig ambient")), float(_need(amb, "n0", "rig ambient")),
                       float(rig.get("T_max", 2000.0)))

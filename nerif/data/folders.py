@@ -1,19 +1,37 @@
 """Checks shared by the readers of real data (:mod:`nerif.data.capture`, :mod:`nerif.data.transforms`): the
-dataset folder, a region of interest on the sensor, displacement estimates that are not finite, and the true
-temperature of a rendered dataset."""
+dataset folder, the binning of the ray grid, a region of interest on the sensor, displacement estimates that are
+not finite, and the true temperature of a rendered dataset."""
 from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
 from nerif.data.phantoms import read_volume
-from nerif.geometry import ProbeBox
+from nerif.geometry import Camera, ProbeBox, ray_binning
 from nerif.physics import check_temperature
 from nerif.sensing.imaging import resample
 
 log = logging.getLogger(__name__)
+
+
+def resolve_binning(setting, cameras: list[Camera], box: Optional[ProbeBox], sensor: str) -> int:
+    """``data.binning`` for these full-sensor ``cameras``: ``auto`` (about one ray per voxel of ``box`` across,
+    :func:`nerif.geometry.ray_binning`, logged), or a whole number that divides every camera's sensor (``sensor``
+    names it); one sentence otherwise."""
+    if setting == "auto":
+        b = ray_binning(cameras, box)
+        per_voxel = float(np.median([c.pixels_per_mm(np.zeros(3)) for c in cameras])) * box.voxel_mm
+        log.info("data.binning=auto: %d x %d pixels a ray (%.1f pixels span a voxel of %g mm at the probe centre)",
+                 b, b, per_voxel, box.voxel_mm)
+        return b
+    if isinstance(setting, bool) or not isinstance(setting, int) or setting < 1:
+        raise ValueError(f"data.binning={setting!r}: auto or a whole number of pixels (at least 1)")
+    if any(c.width % setting or c.height % setting for c in cameras):
+        raise ValueError(f"data.binning={setting} must divide {sensor}")
+    return setting
 
 
 def region_of_interest(x: int, y: int, w: int, h: int, width: int, height: int, what: str) -> np.ndarray:

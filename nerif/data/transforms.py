@@ -24,7 +24,7 @@ from typing import Optional
 import cv2
 import numpy as np
 
-from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest
+from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest, resolve_binning
 from nerif.data.scene import DATASETS, Scene, scene_from_images
 from nerif.geometry import Camera, ProbeBox, camera_from_nerf_pose
 from nerif.io.export import atomic_write, write_png
@@ -105,15 +105,15 @@ def read_frame(root: Path, split: str, meta: dict, k: int, optics: dict):
     return cam, eps, roi, mask[..., 0] > 0
 
 
-def load_views(root: Path, split: str, box: ProbeBox, ambient: Ambient, optics: dict, binning: int = 1,
+def load_views(root: Path, split: str, box: ProbeBox, ambient: Ambient, optics: dict, binning=1,
                device="cpu", **fields) -> Scene:
-    """The views of one split as a scene (deflections in sigma units, the split's own 2-D masks and ROI)."""
+    """The views of one split as a scene (deflections in sigma units, the split's own 2-D masks and ROI), read out
+    with ``binning`` (``auto``: :func:`nerif.data.folders.resolve_binning`)."""
     meta = read_split(root, split)
+    frames = [read_frame(root, split, meta, k, optics) for k in range(len(meta["frames"]))]  # checks w, h first
+    binning = resolve_binning(binning, [f[0] for f in frames], box, f"the image size {meta['w']} x {meta['h']} px")
     cameras, eps_images, valid, masks = [], [], [], []
-    for k in range(len(meta["frames"])):
-        cam, eps, roi, mask = read_frame(root, split, meta, k, optics)  # the first checks w and h against its image
-        if int(meta["w"]) % binning or int(meta["h"]) % binning:
-            raise ValueError(f"data.binning={binning} must divide the image size {meta['w']} x {meta['h']} px")
+    for cam, eps, roi, mask in frames:
         cam = cam.binned(binning) if binning > 1 else cam
         cameras.append(cam)
         eps_images.append(resample(eps * ambient.delta_thre, cam.height, cam.width))  # block means
@@ -132,7 +132,7 @@ def optics(pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32
 @DATASETS.register("transforms")
 def transforms(root: str, probe: dict, T0: float, n0: float, *, sigma_prior: Optional[list],
                T_max: Optional[float] = None, heldout_split: Optional[str] = "val", heldout_views: Optional[list] = None,
-               binning: int = 4, pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32.0,
+               binning="auto", pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32.0,
                background_mm: float = 1600.0, truth: Optional[str] = None, device: str = "cpu") -> Scene:
     """Train on ``transforms_train.json``; hold out ``transforms_<heldout_split>.json`` (None: no held-out views),
     or, with ``heldout_views``, those views of the training split (novel views; ``heldout_split`` must be None).
@@ -140,7 +140,8 @@ def transforms(root: str, probe: dict, T0: float, n0: float, *, sigma_prior: Opt
     Args:
         root: the dataset folder. probe: ``shape`` (nx, ny, nz) and ``voxel_mm`` of the reconstruction grid,
             centred on the world origin. T0, n0: ambient state. T_max: None (the files hold deflections of sigma).
-        binning: b x b pixel blocks averaged into one ray (1 = every pixel).
+        binning: b x b pixel blocks averaged into one ray (1 = every pixel); ``auto``: about one ray per voxel
+            across at the probe (:func:`nerif.geometry.ray_binning`).
         sigma_prior: (a, b) interval of sigma the dataset's flame lies in (the field's prior unless ``field.prior``
             is set); None: the field's default.
         pitch_um: pixel pitch, also the length unit of the poses. focal_mm, f_number, background_mm: lens and
@@ -149,8 +150,6 @@ def transforms(root: str, probe: dict, T0: float, n0: float, *, sigma_prior: Opt
             (a rendered dataset): every error against the truth is then reported; needs ``T_max``.
     """
     root = dataset_folder(root)
-    if binning < 1:
-        raise ValueError(f"data.binning must be at least 1, got {binning}")
     box = ProbeBox(tuple(int(n) for n in probe["shape"]), float(probe["voxel_mm"]))
     ambient = Ambient(float(T0), float(n0), None if T_max is None else float(T_max))
     truth_T = None
@@ -167,7 +166,7 @@ def transforms(root: str, probe: dict, T0: float, n0: float, *, sigma_prior: Opt
             raise ValueError("data.heldout_views holds out training views: set data.heldout_split=null with it")
         return scene.split_views(heldout_views)
     if heldout_split:
-        scene.heldout = load_views(root, heldout_split, box, ambient, cams, binning, device)
+        scene.heldout = load_views(root, heldout_split, box, ambient, cams, scene.cameras[0].binning, device)
     return scene
 
 

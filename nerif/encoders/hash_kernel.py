@@ -10,8 +10,9 @@ gradient. Two backends compute the same function as the tensor path (same cells,
 
 - ``triton`` (CUDA): one program per block of 128 points and one level; atomic adds in the backward pass.
   Triton ships with CUDA builds of PyTorch; on the CPU its interpreter runs it (``TRITON_INTERPRET=1``, the tests).
-- ``cpp`` (CPU): ``hash_cpu.cpp``, compiled once per machine by ``torch.utils.cpp_extension`` (g++, OpenMP): points
-  in parallel forward, levels in parallel backward (each level owns its rows of the table: no atomics).
+- ``cpp`` (CPU): ``hash_cpu.cpp``, compiled once per Python environment by ``torch.utils.cpp_extension`` (a C++
+  compiler with OpenMP, and ninja, which nerif depends on): points in parallel forward, levels in parallel backward
+  (each level owns its rows of the table: no atomics).
 
 Positions get no gradient, so the encoder takes these paths only when they need none (the ``discrete`` central
 differences, evaluation, the occupancy grid), and the tensor path otherwise.
@@ -19,8 +20,11 @@ differences, evaluation, the occupancy grid), and the tensor path otherwise.
 from __future__ import annotations
 
 import functools
+import hashlib
 import logging
+import os
 import shutil
+import sys
 from pathlib import Path
 
 import torch
@@ -28,8 +32,15 @@ import torch
 try:
     import triton
     import triton.language as tl
-except ImportError:  # no Triton (a CPU build of PyTorch without the dev extras): the cpp backend only
+except ImportError:  # no Triton (a CPU build of PyTorch): the cpp backend only
     triton = None
+try:  # the ninja package's binary, where the environment's bin/ is not on the PATH (a venv's python run directly)
+    import ninja
+
+    if ninja.BIN_DIR not in os.environ.get("PATH", "").split(os.pathsep):
+        os.environ["PATH"] = os.pathsep.join([ninja.BIN_DIR, os.environ.get("PATH", "")])
+except (ImportError, AttributeError):
+    pass
 
 log = logging.getLogger(__name__)
 
@@ -50,16 +61,28 @@ def available(backend: str) -> bool:
     return shutil.which("c++") is not None or shutil.which("g++") is not None
 
 
+def build_directory() -> Path:
+    """Where this Python environment keeps its build of the CPU kernel: torch's extension cache
+    (``$TORCH_EXTENSIONS_DIR``, default ``~/.cache/torch_extensions``), in a folder of its own per environment and
+    torch version, so that two environments on one machine do not rebuild each other's."""
+    key = hashlib.sha1(f"{sys.prefix}|{torch.__version__}".encode()).hexdigest()[:12]
+    root = os.environ.get("TORCH_EXTENSIONS_DIR") or Path.home() / ".cache" / "torch_extensions"
+    folder = Path(root) / f"nerif_hash_cpu_{key}"
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
 @functools.lru_cache(maxsize=1)
 def cpp_module():
-    """The compiled CPU kernels (built on first use, then loaded from torch's extension cache, which rebuilds when
-    the source or the flags change)."""
+    """The compiled CPU kernels (built on first use, then loaded from this environment's :func:`build_directory`,
+    rebuilt when the source or the flags change)."""
     from torch.utils.cpp_extension import load_inline
 
     source = (Path(__file__).with_name("hash_cpu.cpp")).read_text()
     log.info("loading the CPU hash-encoding kernel (compiled on first use, about 20 s; cached after)")
     return load_inline("nerif_hash_cpu", cpp_sources=[source], functions=["hash_forward", "hash_backward"],
-                       extra_cflags=["-O3", "-fopenmp"], extra_ldflags=["-fopenmp"], verbose=False)
+                       extra_cflags=["-O3", "-fopenmp"], extra_ldflags=["-fopenmp"], verbose=False,
+                       build_directory=str(build_directory()))
 
 
 if triton is not None:

@@ -6,6 +6,7 @@ its scene; they compute no score of their own: :class:`nerif.evaluation.Evaluati
 """
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +46,13 @@ def volume_slices(sigma: np.ndarray, scene, title: str):
     return slice_figure(scene.ambient.temperature_from_sigma(sigma), scene.box, scene.truth_T, title)
 
 
+def camera_file(name: str) -> str:
+    """A camera's name as a file name: ``camera 8 (160.0 deg)`` -> ``camera08``; others with every run of
+    characters but letters and digits as one ``_``."""
+    m = re.match(r"camera (\d+)", name)
+    return f"camera{int(m.group(1)):02d}" if m else re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_") or "camera"
+
+
 def write_heldout(solver, out_dir: Path) -> dict:
     """Predictions on every held-out ray: their errors, and per view a figure of observed, predicted and
     difference (image displacements [px] where deflections are physical, else deflections)."""
@@ -52,8 +60,9 @@ def write_heldout(solver, out_dir: Path) -> dict:
     pred = ev.heldout_predictions(solver.predict)
     unit = "px" if ev.physical else "sigma"
     for v, (obs, predicted) in enumerate(ev.heldout_images(pred)):
-        save_figure(heldout_figure(obs, predicted, unit=unit, title=f"held out: {ev.scene.heldout.cameras[v].name}"),
-                    out_dir / "heldout" / f"view{v:02d}.png")
+        cam = ev.scene.heldout.cameras[v]
+        save_figure(heldout_figure(obs, predicted, unit=unit, title=f"held out: {cam.name}"),
+                    out_dir / "heldout" / f"{camera_file(cam.name)}.png")
     return ev.heldout_errors(solver.predict, every=True, pred=pred)
 
 
@@ -72,7 +81,8 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, **vols)
     label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
     save_figure(volume_slices(sigma, scene, f"{label}, {solver.iteration} iterations"), out_dir / "slices.png")
-    save_figure(curves_figure(solver.history, losses), out_dir / "curves.png")
+    save_figure(curves_figure(solver.history, losses, solver.report.get("images_from_iteration")),
+                out_dir / "curves.png")
     final = dict(solver.history[-1]) if solver.history else solver.evaluate()
     final.pop("iteration", None)
     if scene.heldout is not None:
@@ -83,6 +93,7 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     final["wall_time_s"] = solver.train_seconds
     final["history"] = solver.history
     final.update(solver.labels)
+    final["ray_binning"] = int(scene.cameras[0].binning)  # sensor pixels across a ray
     final.update(solver.report)
     final.update(solver.saturation(sigma))
     if scene.sensing is not None:

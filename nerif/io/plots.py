@@ -83,14 +83,35 @@ def save_figure(fig, path: Path) -> Path:
     return path
 
 
-def curves_figure(history: list[dict], losses: list[tuple[int, float]]):
-    """Training loss against iteration and the evaluation errors against wall time."""
+TERM_NAMES = {"loss": "total", "loss_boundary": "ambient faces (sigma = 0)", "loss_tv": "total variation"}
+
+
+def curves_figure(history: list[dict], losses: list[tuple[int, dict]], images_from: Optional[int] = None):
+    """Each term of the training loss against iteration (``losses``: (iteration, the step's terms), as the solver
+    names them), the switch from the flow's deflections to the images marked at ``images_from``; and the
+    evaluation errors against wall time. The data term is normalised by what it compares (the deflections' or the
+    images' mean square), so its level changes where the fit switches from one to the other."""
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8))
     if losses:
-        it, lv = zip(*losses)
-        a.semilogy(it, lv, lw=0.8)
+        it = np.array([i for i, _ in losses])
+        names = [k for k in losses[0][1] if k.startswith("loss")]
+        for k in names:
+            v = np.array([t.get(k, np.nan) for _, t in losses], dtype=float)
+            label = TERM_NAMES.get(k, f"data term ({k[5:]} gradients)")
+            if k in TERM_NAMES or images_from is None:
+                a.semilogy(it, v, lw=0.8 if k != "loss" else 1.2, label=label + (
+                    "" if k in TERM_NAMES else ": flow deflections"))
+            else:  # the data term: the flow's deflections, then the images with the flow term beside them
+                flow, images = it < images_from, it >= images_from
+                a.semilogy(it[flow], v[flow], lw=0.8, label=f"{label}: flow deflections")
+                a.semilogy(it[images], v[images], lw=0.8, label=f"{label}: images + flow")
+        if images_from is not None and it[0] <= images_from <= it[-1]:
+            a.axvline(images_from, color="0.4", ls="--", lw=0.8)
+            a.annotate("flow -> images", (images_from, 1), xycoords=("data", "axes fraction"), xytext=(3, -12),
+                       textcoords="offset points", fontsize=7, color="0.3")
+        a.legend(fontsize=7, loc="upper right")
     a.set_xlabel("iteration")
-    a.set_ylabel("loss (normalised deflection MSE)")
+    a.set_ylabel("training loss terms (normalised)")
     key = "temperature_rmse_K" if history and "temperature_rmse_K" in history[0] else "deflection_rmse"
     if history:
         b.plot([h["wall_time_s"] for h in history], [h[key] for h in history], "o-", ms=3)

@@ -274,13 +274,14 @@ class IterativeSolver:
     def fit(self, *, checkpoint_every: int, checkpoint: Optional[Path] = None,
             on_eval: Optional[Callable[[dict], None]] = None, on_step: Optional[Callable[[int, dict], None]] = None,
             progress: bool = True, checkpoint_every_s: Optional[float] = None,
-            resume_hint: Optional[str] = None) -> dict:
+            resume_hint: Optional[str] = None, threads=None) -> dict:
         """Run to ``iterations``, or until converged (a step's ``converged`` term, or :attr:`converged` set by an
         evaluation); evaluates every :attr:`eval_every` and at the end, checkpoints (atomically)
         every ``checkpoint_every`` iterations, at most ``checkpoint_every_s`` seconds apart, at the end and on
         Ctrl-C, SIGTERM or SIGUSR2 (then raises :class:`Interrupted`, after one line saying how to continue:
         ``resume_hint``, default ``train.resume=<checkpoint>``). An exception from ``step`` leaves the last good
-        checkpoint in place."""
+        checkpoint in place. ``threads``: told each step's time (:meth:`nerif.threads.ThreadTuner.after_step`), it
+        may change the CPU thread count between steps."""
         from tqdm import tqdm
 
         bar = tqdm(total=self.iterations, initial=self.iteration, disable=not progress, mininterval=2.0,
@@ -291,6 +292,8 @@ class IterativeSolver:
             with stop_signals() as received:
                 while self.iteration < self.iterations:
                     terms = self.step()
+                    if threads is not None:
+                        threads.after_step(self.step_times[-1])
                     bar.update(1)
                     if on_step is not None:
                         on_step(self.iteration, terms)

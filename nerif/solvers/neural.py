@@ -122,6 +122,7 @@ class NeuralSolver(IterativeSolver):
         self.data_term.setup(scene, self.batches, self.iterations, masks)
         if self.data_term.fitted != "flow":
             self.labels["data_term"] = self.data_term.fitted
+            self.report["images_from_iteration"] = int(self.data_term.flow_iterations)  # after the flow's warm-up
         rms = float(scene.eps[self.batches.inside()].double().norm(dim=-1).pow(2).mean().sqrt()) / scene.scale
         tv = TotalVariation(scene.box, lc["tv_weight"], lc["tv_points"], rms)
         self.tv = tv if tv.active else None

@@ -1,0 +1,161 @@
+"""CPU threads of a run: how many to start with, and a tuner that keeps the fastest count while the machine's load
+changes.
+
+With every core in torch's thread pool, one other busy process makes each parallel region wait for the thread
+that shares a core with it: on 2 cores a training step went from 30 ms to 70-150 ms, where one thread took 44 ms.
+Idle, one thread is 1.5x slower than two. No fixed count wins both (nor does OpenMP's passive wait policy: 36 %
+slower idle), so ``threads=auto`` starts from the cores other processes leave free and then times the steps
+themselves (:class:`ThreadTuner`; ``benchmarks/threads.py``).
+"""
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections import deque
+from typing import Optional
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity mask where the system has one)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def _cpu_times() -> Optional[tuple[float, float]]:
+    """(busy, total) jiffies of the whole machine since boot, from ``/proc/stat``; None where there is none."""
+    try:
+        with open("/proc/stat") as f:
+            fields = [float(x) for x in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0.0)  # idle + iowait
+    return sum(fields[:8]) - idle, sum(fields[:8])
+
+
+def busy_cores(interval_s: float = 0.2) -> float:
+    """Cores kept busy by other processes, averaged over ``interval_s`` while this one waits (0 where the system
+    does not say: not Linux)."""
+    a = _cpu_times()
+    time.sleep(interval_s)
+    b = _cpu_times()
+    if a is None or b is None or b[1] <= a[1]:
+        return 0.0
+    return (b[0] - a[0]) / (b[1] - a[1]) * (os.cpu_count() or 1)
+
+
+def resolve_threads(setting, parallel_jobs: int = 1) -> int:
+    """CPU threads a run starts with: ``auto`` = the usable cores less those other processes keep busy now, for a
+    job alone (``OMP_NUM_THREADS``, where set, caps it); the usable cores shared evenly by ``parallel_jobs`` jobs
+    running at once; or a positive number (at most the usable cores). One sentence for anything else."""
+    cores = usable_cores()
+    if setting == "auto":
+        if parallel_jobs > 1:
+            return max(1, cores // parallel_jobs)
+        free = max(1, min(cores, round(cores - busy_cores())))
+        if os.environ.get("OMP_NUM_THREADS", "").isdigit():
+            free = max(1, min(free, int(os.environ["OMP_NUM_THREADS"])))
+        return free
+    if isinstance(setting, bool) or not isinstance(setting, int) or setting < 1:
+        raise ValueError(f"threads={setting}: auto or a number of CPU threads (at least 1)")
+    if setting > cores:  # more threads than cores only wait on each other (38x slower with 1000 on 2 cores)
+        log.warning("threads=%d: this process may use %d core(s); running with %d", setting, cores, cores)
+        return cores
+    return setting
+
+
+class ThreadTuner:
+    """Keeps a CPU run at the fastest of a few thread counts under the machine's current load, by timing its own
+    training steps: after ``warmup`` steps it runs ``probe_steps`` steps at each candidate and keeps the count
+    with the lowest median step time; it probes again after ``period`` steps (twice as long each time the same
+    count wins again, up to 4x), and at once when the kept count's median step drifts by more than ``slack``
+    times from what it was when chosen (another process started or ended).
+
+    Args:
+        cores: the most threads to try (the usable cores); candidates are ``cores``, ``cores - 1`` and
+            ``cores // 2`` (at least 1).
+        set_threads: sets the count (``torch.set_num_threads``).
+    """
+
+    def __init__(self, cores: int, set_threads, warmup: int = 10, probe_steps: int = 6, period: int = 100,
+                 slack: float = 1.3):
+        self.candidates = sorted({max(1, c) for c in (cores, cores - 1, cores // 2)}, reverse=True)
+        self.set_threads, self.warmup, self.probe_steps = set_threads, warmup, probe_steps
+        self.base_period, self.period, self.slack = period, period, slack
+        self.current = self.candidates[0]
+        self.queue: list[int] = []  # candidates still to time in this probe
+        self.times: dict[int, list[float]] = {}
+        self.chosen_ms: Optional[float] = None  # median step of the kept count when it was chosen
+        self.recent: deque[float] = deque(maxlen=16)
+        self.steps = 0  # steps seen
+        self.steady = 0  # steps at the kept count since the last probe
+        self.switches: list[tuple[int, int]] = []  # (step, threads) each time the kept count changed
+
+    @property
+    def enabled(self) -> bool:
+        return len(self.candidates) > 1
+
+    def start(self, threads: int) -> None:
+        """The count the run starts with (:func:`resolve_threads`)."""
+        self.current = threads
+        self.set_threads(threads)
+
+    def _probe(self) -> None:
+        self.queue, self.times = list(self.candidates), {}
+        self._use(self.queue[0])
+
+    def _use(self, n: int) -> None:
+        if n != self.current:
+            self.current = n
+            self.set_threads(n)
+
+    def after_step(self, seconds: float) -> None:
+        """Account one training step of ``seconds`` run at the current count; may change the count."""
+        if not self.enabled:
+            return
+        self.steps += 1
+        if self.steps == self.warmup:
+            self._probe()
+            return
+        if self.queue:  # probing
+            t = self.times.setdefault(self.current, [])
+            t.append(seconds)
+            if len(t) < self.probe_steps:
+                return
+            self.queue.pop(0)
+            if self.queue:
+                self._use(self.queue[0])
+                return
+            medians = {n: float(np.median(v)) for n, v in self.times.items()}
+            best = min(medians, key=medians.get)
+            same = best == (self.switches[-1][1] if self.switches else None)
+            self.period = min(4 * self.base_period, 2 * self.period) if same else self.base_period
+            if not same:
+                self.switches.append((self.steps, best))
+                log.debug("threads=auto: %d thread(s) (median step %s)", best,
+                          ", ".join(f"{n}: {1e3 * m:.1f} ms" for n, m in sorted(medians.items())))
+            self._use(best)
+            self.chosen_ms, self.steady = 1e3 * medians[best], 0
+            self.recent.clear()
+            return
+        if self.steps < self.warmup:
+            return
+        self.steady += 1
+        self.recent.append(seconds)
+        drift = (1e3 * float(np.median(self.recent)) / self.chosen_ms if len(self.recent) == self.recent.maxlen
+                 else 1.0)
+        if self.steady >= self.period or not 1 / self.slack < drift < self.slack:
+            self._probe()
+
+    @property
+    def kept(self) -> int:
+        """The count the last probe chose (the start's before any)."""
+        return self.switches[-1][1] if self.switches else self.current
+
+    def report(self) -> dict:
+        """For ``metrics.json``: the count kept at the end (``cpu_threads``) and every count kept in turn, with
+        the step it began (``cpu_threads_chosen``)."""
+        return {"cpu_threads": self.kept, "cpu_threads_chosen": [[s, n] for s, n in self.switches]}
