@@ -5,7 +5,7 @@ and without another busy process (a plain Python loop on one core), side by side
     python benchmarks/threads.py                       # 200 iterations a run, 2 rounds (CPU: about 6 minutes)
     python benchmarks/threads.py --iterations 1200     # whole default runs
 
-Writes ``threads.json`` and ``threads.md`` under ``--out`` (default ``benchmarks/out/threads``): per setting and
+Writes ``threads.json`` and ``threads.md`` under ``--out`` (default ``benchmarks/results/threads``): per setting and
 load the median ms/iteration of each round, and the targets of issue 35: under load the default within 1.5x of
 the best setting measured under the same load; idle, within 5 % of every core.
 """
@@ -47,7 +47,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--iterations", type=int, default=200)
     ap.add_argument("--rounds", type=int, default=2)
-    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "out" / "threads")
+    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "results" / "threads")
     a = ap.parse_args()
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     settings = {"auto": "auto", f"every core ({cores}, auto before)": str(cores), "1": "1"}
