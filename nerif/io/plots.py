@@ -91,25 +91,26 @@ def curves_figure(history: list[dict], losses: list[tuple[int, dict]], images_fr
     names them), the switch from the flow's deflections to the images marked at ``images_from``; and the
     evaluation errors against wall time. The data term is normalised by what it compares (the deflections' or the
     images' mean square), so its level changes where the fit switches from one to the other."""
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.4))
     if losses:
         it = np.array([i for i, _ in losses])
         names = [k for k in losses[0][1] if k.startswith("loss")]
         for k in names:
             v = np.array([t.get(k, np.nan) for _, t in losses], dtype=float)
             label = TERM_NAMES.get(k, f"data term ({k[5:]} gradients)")
-            if k in TERM_NAMES or images_from is None:
-                a.semilogy(it, v, lw=0.8 if k != "loss" else 1.2, label=label + (
-                    "" if k in TERM_NAMES else ": flow deflections"))
+            if k == "loss":
+                a.semilogy(it, v, color="k", lw=1.6, alpha=0.35, label=label)
+            elif k in TERM_NAMES or images_from is None:
+                a.semilogy(it, v, lw=0.8, label=label + ("" if k in TERM_NAMES else ": flow deflections"))
             else:  # the data term: the flow's deflections, then the images with the flow term beside them
                 flow, images = it < images_from, it >= images_from
                 a.semilogy(it[flow], v[flow], lw=0.8, label=f"{label}: flow deflections")
                 a.semilogy(it[images], v[images], lw=0.8, label=f"{label}: images + flow")
         if images_from is not None and it[0] <= images_from <= it[-1]:
             a.axvline(images_from, color="0.4", ls="--", lw=0.8)
-            a.annotate("flow -> images", (images_from, 1), xycoords=("data", "axes fraction"), xytext=(3, -12),
+            a.annotate("flow -> images", (images_from, 0), xycoords=("data", "axes fraction"), xytext=(3, 4),
                        textcoords="offset points", fontsize=7, color="0.3")
-        a.legend(fontsize=7, loc="upper right")
+        a.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
     a.set_xlabel("iteration")
     a.set_ylabel("training loss terms (normalised)")
     key = "temperature_rmse_K" if history and "temperature_rmse_K" in history[0] else "deflection_rmse"
