@@ -25,26 +25,35 @@ def usable_cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-def _cpu_times() -> Optional[tuple[float, float]]:
-    """(busy, total) jiffies of the whole machine since boot, from ``/proc/stat``; None where there is none."""
+def _cpu_times() -> Optional[dict[int, tuple[float, float]]]:
+    """Per core of the machine, (busy, total) jiffies since boot, from ``/proc/stat``; None where there is none."""
     try:
         with open("/proc/stat") as f:
-            fields = [float(x) for x in f.readline().split()[1:]]
-    except (OSError, ValueError):
+            lines = [ln.split() for ln in f if ln.startswith("cpu") and ln[3:4].isdigit()]
+        out = {}
+        for ln in lines:
+            fields = [float(x) for x in ln[1:9]]
+            idle = fields[3] + (fields[4] if len(fields) > 4 else 0.0)  # idle + iowait
+            out[int(ln[0][3:])] = (sum(fields) - idle, sum(fields))
+        return out
+    except (OSError, ValueError, IndexError):
         return None
-    idle = fields[3] + (fields[4] if len(fields) > 4 else 0.0)  # idle + iowait
-    return sum(fields[:8]) - idle, sum(fields[:8])
 
 
 def busy_cores(interval_s: float = 0.2) -> float:
-    """Cores kept busy by other processes, averaged over ``interval_s`` while this one waits (0 where the system
-    does not say: not Linux)."""
+    """Cores this process may use (:func:`usable_cores`) that other processes keep busy, averaged over
+    ``interval_s`` while this one waits (0 where the system does not say: not Linux)."""
     a = _cpu_times()
     time.sleep(interval_s)
     b = _cpu_times()
-    if a is None or b is None or b[1] <= a[1]:
+    if not a or not b:
         return 0.0
-    return (b[0] - a[0]) / (b[1] - a[1]) * (os.cpu_count() or 1)
+    mine = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else set(a)
+    busy = 0.0
+    for k in mine & set(a) & set(b):
+        total = b[k][1] - a[k][1]
+        busy += (b[k][0] - a[k][0]) / total if total > 0 else 0.0
+    return busy
 
 
 def resolve_threads(setting, parallel_jobs: int = 1) -> int:
