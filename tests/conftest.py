@@ -8,6 +8,16 @@ import pytest
 import torch
 
 
+def pytest_report_header(config):
+    """One line at the top of the run where the project's shared captures are not beside the clone."""
+    from tests.helpers import SHARED
+
+    if not SHARED.is_dir():
+        return (f"shared data: {SHARED} is not there (a fresh clone; set NERIF_SHARED to the folder holding data/): "
+                "the tests of the shared captures are skipped")
+    return None
+
+
 @pytest.fixture(autouse=True)
 def _seed():
     torch.manual_seed(0)
