@@ -65,10 +65,13 @@ def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Opt
     ``resume_hint``: how to continue after an interruption (default: from this run's checkpoint). ``threads``: a
     :class:`nerif.threads.ThreadTuner` that times the training steps to keep the fastest CPU thread count."""
     with WarningRecords() as records:
-        return _reconstruct(cfg, out_dir, device, frame, start_from, t_start, about, resume_hint, threads, records)
+        return _reconstruct(cfg, out_dir, device, records, frame=frame, start_from=start_from, t_start=t_start,
+                            about=about, resume_hint=resume_hint, threads=threads)
 
 
-def _reconstruct(cfg, out_dir, device, frame, start_from, t_start, about, resume_hint, threads, records) -> dict:
+def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: WarningRecords, *, frame, start_from,
+                 t_start, about, resume_hint, threads) -> dict:
+    """:func:`reconstruct`, with the warnings logged meanwhile in ``records``."""
     t_start = time.perf_counter() if t_start is None else t_start
     torch.manual_seed(cfg.seed)
     # every check that can fail happens here, before any training; the solver checks its settings before any data
