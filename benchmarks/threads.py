@@ -61,7 +61,8 @@ def main() -> None:
                         m = run(setting, a.iterations, Path(tmp) / f"{r}-{load}-{setting}")
                         rows.setdefault(name, {}).setdefault(load, []).append(m["ms_per_iteration"])
                         print(f"round {r}, {load:>16}, threads={setting:>4}: {m['ms_per_iteration']:6.1f} ms/it, "
-                              f"{m['wall_time_s']:.1f} s training, chosen {m.get('cpu_threads_chosen')}", flush=True)
+                              f"{m['wall_time_s']:.1f} s training, {m['total_time_s']:.0f} s in all, "
+                              f"chosen {m.get('cpu_threads_chosen')}", flush=True)
     med = {n: {load: float(np.median(v)) for load, v in d.items()} for n, d in rows.items()}
     auto, before = med["auto"], med[f"every core ({cores}, auto before)"]
     best_busy = min(m["one busy process"] for m in med.values())

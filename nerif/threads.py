@@ -79,9 +79,10 @@ def resolve_threads(setting, parallel_jobs: int = 1) -> int:
 class ThreadTuner:
     """Keeps a CPU run at the fastest of a few thread counts under the machine's current load, by timing its own
     training steps: after ``warmup`` steps it runs ``probe_steps`` steps at each candidate and keeps the count
-    with the lowest median step time; it probes again after ``period`` steps (twice as long each time the same
-    count wins again, up to 4x), and at once when the kept count's median step drifts by more than ``slack``
-    times from what it was when chosen (another process started or ended).
+    with the lowest median step time (the kept count stays unless another is ``margin`` times faster); it probes
+    again after ``period`` steps (twice as long each time the same count wins again, up to 8x), and at once when
+    the kept count's median step drifts by more than ``slack`` times from what it was when chosen (another process
+    started or ended).
 
     Args:
         cores: the most threads to try (the usable cores); candidates are ``cores``, ``cores - 1`` and
@@ -89,11 +90,11 @@ class ThreadTuner:
         set_threads: sets the count (``torch.set_num_threads``).
     """
 
-    def __init__(self, cores: int, set_threads, warmup: int = 10, probe_steps: int = 6, period: int = 100,
-                 slack: float = 1.3):
+    def __init__(self, cores: int, set_threads, warmup: int = 10, probe_steps: int = 5, period: int = 100,
+                 slack: float = 1.3, margin: float = 1.1):
         self.candidates = sorted({max(1, c) for c in (cores, cores - 1, cores // 2)}, reverse=True)
         self.set_threads, self.warmup, self.probe_steps = set_threads, warmup, probe_steps
-        self.base_period, self.period, self.slack = period, period, slack
+        self.base_period, self.period, self.slack, self.margin = period, period, slack, margin
         self.current = self.candidates[0]
         self.queue: list[int] = []  # candidates still to time in this probe
         self.times: dict[int, list[float]] = {}
@@ -140,8 +141,11 @@ class ThreadTuner:
                 return
             medians = {n: float(np.median(v)) for n, v in self.times.items()}
             best = min(medians, key=medians.get)
-            same = best == (self.switches[-1][1] if self.switches else None)
-            self.period = min(4 * self.base_period, 2 * self.period) if same else self.base_period
+            held = self.switches[-1][1] if self.switches else None
+            if held in medians and medians[best] * self.margin > medians[held]:
+                best = held  # a near tie: the step-to-step noise, not the load, decides it
+            same = best == held
+            self.period = min(8 * self.base_period, 2 * self.period) if same else self.base_period
             if not same:
                 self.switches.append((self.steps, best))
                 log.debug("threads=auto: %d thread(s) (median step %s)", best,

@@ -262,3 +262,18 @@ def test_a_series_capture_reconstructs_every_frame_warm_started(series, tmp_path
                                                                                    (2, True, 10)]
     assert all(r["heldout_displacement_rmse_px"] > 0 for r in m["frames"]) and m["temperature_rmse_K"] is None  # no truth
     assert (tmp_path / "sequence.pvd").read_text().count("reconstruction.vti") == 3
+
+
+def test_optional_rig_keys_left_null_take_their_defaults(written, tmp_path):
+    """Issue 36: ``T_max: null`` or ``heldout: null`` in rig.yaml ended in a TypeError traceback. Null is absent:
+    T_max 2000 K, the last view held out."""
+    root, _, _ = written
+    rig = yaml.safe_load((root / RIG_FILE).read_text())
+    for f in root.iterdir():
+        if f.suffix == ".png":
+            (tmp_path / f.name).symlink_to(f)
+    rig.update(T_max=None, heldout=None, temperature_range_K=None)
+    (tmp_path / RIG_FILE).write_text(yaml.safe_dump(rig))
+    cap = capture(str(tmp_path), FLOW, binning=8)
+    assert cap.ambient.T_max == 2000.0
+    assert cap.n_views == 6 and cap.heldout.n_views == 1 and cap.heldout.cameras[0].name.startswith("camera 6 ")

@@ -51,3 +51,38 @@ def test_the_flames_light_and_a_gain_drift_change_only_the_distorted_image_as_se
     assert abs(float(ratio) - 1.1) < 0.01
     assert plain.images[0].reference.shape == (160, 90) and plain.images[0].camera.binning == 8
 
+
+
+def calibrated_scene(cache_dir, *overrides):
+    """A blob seen by 3 hand-placed cameras (``rig=calibrated``: each at its own distance, with its own lens)."""
+    from nerif.configs import compose, group
+
+    cfg = compose(["data.sensing=realistic", "rig=calibrated", "rig.n_cameras=3", "rig.binning=8",
+                   "phantom=gaussian_blob", "phantom.shape=[16,16,16]", "phantom.voxel_mm=3.0", "phantom.width_mm=7.0",
+                   "data.sensor.aperture_rays=4", "data.render_supersample=1", f"data.cache_dir={cache_dir}",
+                   *overrides])
+    return DATASETS.build(group(cfg, "data"), device="cpu")
+
+
+def test_the_aperture_cache_renders_again_for_another_lens_distortion(tmp_path):
+    """Issue 36: the aperture renderings were keyed on pose, lens and sensor but not on the principal point, aspect
+    or distortion: a second run with another ``rig.k1`` reused the first run's renderings."""
+    def build(k1: float):
+        return calibrated_scene(tmp_path, f"rig.k1=[{k1},{k1}]")
+
+    build(-0.2)
+    assert len(list(tmp_path.glob("aperture-*.npz"))) == 3
+    build(0.05)
+    assert len(list(tmp_path.glob("aperture-*.npz"))) == 6  # every camera rendered again
+
+
+def test_the_circle_of_confusion_is_each_views_own(tmp_path):
+    """Issue 36: ``circle_of_confusion_px`` was the last view's. Cameras at different distances from the probe blur
+    it differently: the record holds one value per view, each the optics' own for that camera."""
+    from nerif.sensing.optics import circle_of_confusion
+
+    scene = calibrated_scene(None)
+    coc = scene.sensing["circle_of_confusion_px"]
+    own = [circle_of_confusion(c.unbinned(c.binning))["d_mm"] / (c.pitch_mm / c.binning) for c in scene.cameras]
+    assert coc.shape == (3,) and np.ptp(coc) > 0.01 * coc.max()
+    np.testing.assert_allclose(coc, own, rtol=1e-9)

@@ -351,6 +351,12 @@ def capture_frames(root: str, frames=None, **_) -> Optional[list[Frame]]:
     return [Frame(k, listed[k]["time_s"]) for k in picked]
 
 
+def _optional(rig: dict, key: str, default):
+    """An optional key of ``rig.yaml``: its value, or ``default`` where it is absent or null."""
+    value = rig.get(key)
+    return default if value is None else value
+
+
 @DATASETS.register("capture")
 def capture(root: str, flow: dict, binning="auto", heldout: Optional[list] = None, frames=None,
             frame: Optional[int] = None, truth: Optional[str] = None, device: str = "cpu") -> Scene:
@@ -379,8 +385,9 @@ def capture(root: str, flow: dict, binning="auto", heldout: Optional[list] = Non
     valid = roi_mask(rig, root, cameras[0].binning)
     amb = rig["ambient"]
     ambient = Ambient(float(_need(amb, "T0", "rig ambient")), float(_need(amb, "n0", "rig ambient")),
-                      float(rig.get("T_max", 2000.0)))
-    held = heldout_views(heldout if heldout is not None else rig.get("heldout", [len(cameras) - 1]), len(cameras))
+                      float(_optional(rig, "T_max", 2000.0)))
+    held = heldout_views(heldout if heldout is not None else _optional(rig, "heldout", [len(cameras) - 1]),
+                         len(cameras))
     prior = sigma_prior(rig, ambient, root)
     truth_T = read_truth(truth, box) if truth is not None else None
     rays = rays_in_box(box, cameras, device)  # a camera that does not see the box fails here, before the flow

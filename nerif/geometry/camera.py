@@ -8,7 +8,7 @@ position, while images stay on the distorted pixel grid.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Optional
 
 import numpy as np
@@ -65,6 +65,15 @@ class Camera:
         R = np.asarray(self.rotation, dtype=np.float64)
         if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
             raise ValueError(f"{self.name}: its rotation is not a rotation (orthonormal, determinant +1)")
+
+    def fingerprint(self) -> list:
+        """Every attribute but the name, as plain numbers and lists: what a cache of anything this camera renders
+        must be keyed on (a new attribute joins it by itself)."""
+        def plain(v):
+            v = np.asarray(v).tolist() if isinstance(v, (np.ndarray, np.generic)) else v
+            return [plain(x) for x in v] if isinstance(v, (list, tuple)) else v
+
+        return [plain(getattr(self, f.name)) for f in fields(self) if f.name != "name"]
 
     @property
     def principal_point(self) -> tuple[float, float]:

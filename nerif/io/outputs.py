@@ -98,7 +98,9 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     final.update(solver.saturation(sigma))
     if scene.sensing is not None:
         final["displacement_rmse_px"] = float(scene.sensing["displacement_rmse_px"])
-        final["circle_of_confusion_px"] = float(scene.sensing["circle_of_confusion_px"])
+        coc = np.atleast_1d(scene.sensing["circle_of_confusion_px"])  # per view
+        final["circle_of_confusion_px"] = float(coc.max())  # the widest blur of any view
+        final["circle_of_confusion_px_per_view"] = [float(c) for c in coc]
     if amb.temperature_known:
         final["temperature_note"] = ("temperature from n assuming an air-dominated gas of fixed composition "
                                      "(n - 1 = T0 (n0 - 1) / T)")

@@ -80,7 +80,7 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
     Returns:
         eps (N, 3) [rad] (NaN where the flow gave no estimate) and a record for figures: ``reference``,
         ``distorted`` (V, H, W) uint8 images; ``u_true``, ``u_est`` (V, h, w, 2) displacements [image px] on the
-        training grid; ``displacement_rmse_px`` over the training rays; circle of confusion [image px].
+        training grid; ``displacement_rmse_px`` over the training rays; ``circle_of_confusion_px`` (V,) [image px].
     """
     render_binning = render_binning or rig_binning
     # every check before the long work
@@ -98,7 +98,7 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
     step_mm = step_mm or box.voxel_mm
     field_key = hashlib.sha256(delta.cpu().numpy().tobytes()).hexdigest()
     eps_obs = torch.empty(len(dirs), 3, dtype=torch.float32)
-    rec = {"reference": [], "distorted": [], "u_true": [], "u_est": []}
+    rec = {"reference": [], "distorted": [], "u_true": [], "u_est": [], "circle_of_confusion_px": []}
     sq_err, count = 0.0, 0
     for v, cam in enumerate(cameras):
         img_cam = cam.unbinned(rig_binning).binned(image_binning)
@@ -107,8 +107,7 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         d_ren = ren_cam.pixel_directions(torch.float64).to(delta.device)
         eps_ren = torch.as_tensor(cached_arrays(cache_dir, "aperture", {
             "delta": field_key, "box": [box.shape, box.voxel_mm], "step": step_mm, "rays": aperture_rays,
-            "camera": [ren_cam.position.tolist(), ren_cam.rotation.tolist(), ren_cam.f_number, ren_cam.focal_mm,
-                       ren_cam.background_mm, ren_cam.pitch_mm, ren_cam.width, ren_cam.height]},
+            "camera": ren_cam.fingerprint()},
             lambda: {"eps": aperture_deflection(delta, box, ren_cam, d_ren, aperture_rays, step_mm).cpu().numpy()},
         )["eps"], dtype=torch.float64, device=d_ren.device)  # the cache gives it back on the CPU
         u_ren = deflection_to_displacement(eps_ren, d_ren, img_cam).cpu().numpy().astype(np.float32)
@@ -142,9 +141,9 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         rec["distorted"].append(to_uint8(distorted))
         rec["u_true"].append(u_true_t.astype(np.float32))
         rec["u_est"].append(u_est_t.astype(np.float32))
+        rec["circle_of_confusion_px"].append(np.float64(coc["d_mm"] / img_cam.pitch_mm))
         log.info("%s: displacement up to %.2f px, circle of confusion %.1f px", cam.name,
                  float(np.abs(u_ren).max()), coc["d_mm"] / img_cam.pitch_mm)
     record = {k: np.stack(x) for k, x in rec.items()}
     record["displacement_rmse_px"] = np.float64(np.sqrt(sq_err / max(count, 1)))
-    record["circle_of_confusion_px"] = np.float64(coc["d_mm"] / img_cam.pitch_mm)
     return eps_obs.to(dirs.device), record
