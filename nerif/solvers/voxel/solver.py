@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import hashlib
+import inspect
 import time
 from typing import Mapping, Optional
 
@@ -12,6 +13,7 @@ from nerif.geometry import box_faces
 from nerif.renderers.deflection import perpendicular
 from nerif.renderers.voxel import voxel_deflection
 from nerif.solvers.base import SOLVERS, IterativeSolver, check_faces
+from nerif.solvers.data_terms import ImageTerm
 from nerif.solvers.voxel.cgls import CGLS, REGULARIZERS
 from nerif.solvers.voxel.projector import PROJECTORS, SparseProjector
 from nerif.solvers.voxel.unified import unified_system
@@ -41,6 +43,9 @@ def built_projector(name: str, box, origins: torch.Tensor, dirs: torch.Tensor, s
         _LAST_PROJECTOR.update(key=key, projector=PROJECTORS.build(
             {"name": name}, box=box, origins=origins, dirs=dirs, step_mm=step_mm, chunk=chunk))
     return _LAST_PROJECTOR["projector"]
+
+
+NEURAL_ONLY = ("interpolation", "patch", "flow_weight", "flow_warmup")  # data_term settings of the neural image term
 
 
 @SOLVERS.register("cgls")
@@ -90,6 +95,13 @@ class CGLSSolver(IterativeSolver):
         if self.data_term["name"] not in ("flow", "images", "auto"):
             raise ValueError(f"solver=cgls fits data_term=flow (or auto: the same), or images (unified BOS), got "
                              f"'{self.data_term['name']}'")
+        defaults = inspect.signature(ImageTerm.__init__).parameters
+        unused = [f"data_term.{k}={self.data_term[k]}" for k in NEURAL_ONLY
+                  if k in self.data_term and self.data_term[k] != defaults[k].default]
+        if unused:
+            raise ValueError(f"{', '.join(unused)}: solver=cgls does not use {'it' if len(unused) == 1 else 'them'} "
+                             "(the neural solver's image term does; unified BOS, data_term=images, takes "
+                             "data_term.highpass_px and lowpass_px)")
         if linearize_at not in ("zero", "flow"):
             raise ValueError(f"solver.linearize_at must be zero or flow, got '{linearize_at}'")
         self.linearize_at = linearize_at
