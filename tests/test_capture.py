@@ -241,16 +241,18 @@ def _drop_last(rig):
 ])
 def test_bad_series_folders_are_one_sentence_before_any_flow(series, tmp_path, monkeypatch, edit_rig, edit_files,
                                                               message):
-    """Every frame of a series is checked before the first frame's flow runs, each error naming the file."""
+    """Every frame of a series is checked before the first frame's flow runs, each error naming the file: a run
+    of the whole series (as ``python -m nerif`` starts it) fails before any flow (issue 36: the test called only
+    the check, which never runs the flow, so its guard could not fail)."""
     import nerif.data.capture as cap_mod
-    from nerif.data.capture import capture_frames
 
     def no_flow(*a, **k):
         raise AssertionError("the flow ran on a bad capture")
 
     monkeypatch.setattr(cap_mod.FLOW, "build", no_flow)
+    root = _series_variant(series, tmp_path, edit_rig, edit_files)
     with pytest.raises((ValueError, FileNotFoundError), match=message):
-        capture_frames(_series_variant(series, tmp_path, edit_rig, edit_files))
+        run(tiny_config("data=capture", f"data.root={root}", "data.binning=8", synthetic=False), tmp_path / "run")
 
 
 def test_a_series_capture_reconstructs_every_frame_warm_started(series, tmp_path):
