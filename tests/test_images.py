@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from nerif.losses.images import cell_origin, cell_weights, highpass, photometric_residual, photometric_scale
+from nerif.losses.images import bandpass, cell_origin, cell_weights, photometric_residual, photometric_scale
 
 H, W = 64, 80
 
@@ -86,7 +86,7 @@ def test_a_smooth_brightness_change_leaves_the_minimum_where_it_was_once_high_pa
         costs = [rms(photometric_residual(a, b, x, u + torch.tensor([s, 0.0], dtype=u.dtype))) for s in shifts]
         return float(shifts[int(torch.tensor(costs).argmin())])
 
-    hp = (highpass(ref, 8.0), highpass(dist, 8.0))
+    hp = (bandpass(ref, 8.0), bandpass(dist, 8.0))
     assert abs(best(*hp)) <= 0.03
     raw = rms(photometric_residual(ref, dist, x, u))
     assert raw > 3 * rms(photometric_residual(*hp, x, u))  # the raw images differ by the brightness itself

@@ -5,7 +5,7 @@ import torch
 
 from nerif.configs import group
 from nerif.data import DATASETS
-from nerif.losses.images import block_pixels, highpass
+from nerif.losses.images import bandpass, block_pixels
 from nerif.sensing.displacement import displacement_matrix
 from nerif.sensing.imaging import sample
 from nerif.solvers.voxel.unified import unified_system
@@ -42,7 +42,7 @@ def test_two_rows_per_ray_are_the_least_squares_of_every_pixel_of_its_block(scen
     sl = scene.view_slice(v)
     rays = torch.arange(sl.start, sl.stop)[::7][:12]
     A = displacement_matrix(scene.dirs[rays].double(), im.camera) * scene.scale
-    ref, dist = (highpass(i.double(), 8.0) for i in (im.reference, im.distorted))
+    ref, dist = (bandpass(i.double(), 8.0) for i in (im.reference, im.distorted))
     x = block_pixels(scene.pixel[rays], cam.width, b).double()
     h = 0.01  # the interpolant's gradient, by the central differences unified_system takes
     gx = (sample(ref, (x + torch.tensor([h, 0.0])).reshape(-1, 2)) - sample(ref, (x - torch.tensor([h, 0.0])).reshape(-1, 2))) / (2 * h)

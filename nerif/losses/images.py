@@ -98,8 +98,3 @@ def bandpass(image: torch.Tensor, highpass_px: Optional[float], lowpass_px: Opti
     image = blur(image, lowpass_px) if lowpass_px else image
     return image - blur(image, highpass_px) if highpass_px else image
 
-
-def highpass(image: torch.Tensor, sigma_px: Optional[float]) -> torch.Tensor:
-    """``image`` less its Gaussian blur of ``sigma_px`` [px] (None or 0: the image itself): :func:`bandpass`
-    without the low pass."""
-    return bandpass(image, sigma_px)
