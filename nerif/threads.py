@@ -109,7 +109,9 @@ class ThreadTuner:
         return len(self.candidates) > 1
 
     def start(self, threads: int) -> None:
-        """The count the run starts with (:func:`resolve_threads`)."""
+        """The count the run starts with (:func:`resolve_threads`); a candidate too (on a busy machine it can be
+        fewer than any of the others)."""
+        self.candidates = sorted(set(self.candidates) | {threads}, reverse=True)
         self.current = threads
         self.set_threads(threads)
 

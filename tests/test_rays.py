@@ -52,3 +52,17 @@ def test_the_automatic_binning_puts_about_one_ray_per_voxel(voxel_mm, binning):
                    pitch_um=40.0, background_behind_mm=800.0, f_number=32.0, binning=1)
     assert cams[0].pixels_per_mm(np.zeros(3)) == pytest.approx(1 / (1 / 105 - 1 / 1600) / 32.0, rel=1e-9)
     assert ray_binning(cams, ProbeBox((10, 10, 10), voxel_mm)) == binning
+
+
+def test_a_sensor_no_block_fits_is_said_to_be_binned_far_from_a_voxel(caplog):
+    """A 361 x 641 px sensor divides only by 1: rays of 1 pixel where a voxel spans 3.5 is said, with the fix."""
+    from nerif.data.folders import resolve_binning
+
+    cams = arc_rig(angles_deg=[0.0, 60.0, 120.0], distance_mm=800.0, focal_mm=105.0, width_px=361, height_px=641,
+                   pitch_um=40.0, background_behind_mm=800.0, f_number=32.0, binning=1)
+    assert resolve_binning("auto", cams, ProbeBox((10, 10, 10), 1.0), "the sensor size 361 x 641 px") == 1
+    assert "divides the sensor size 361 x 641 px, but a voxel spans 3.5 pixels; set data.binning" in caplog.text
+    caplog.clear()
+    fits = arc_rig(angles_deg=[0.0, 60.0], distance_mm=800.0, focal_mm=105.0, width_px=360, height_px=640,
+                   pitch_um=40.0, background_behind_mm=800.0, f_number=32.0, binning=1)
+    assert resolve_binning("auto", fits, ProbeBox((10, 10, 10), 1.0), "the sensor") == 4 and "WARNING" not in caplog.text

@@ -81,7 +81,7 @@ def test_the_circle_of_confusion_is_each_views_own(tmp_path):
     it differently: the record holds one value per view, each the optics' own for that camera."""
     from nerif.sensing.optics import circle_of_confusion
 
-    scene = calibrated_scene(None)
+    scene = calibrated_scene("null")
     coc = scene.sensing["circle_of_confusion_px"]
     own = [circle_of_confusion(c.unbinned(c.binning))["d_mm"] / (c.pitch_mm / c.binning) for c in scene.cameras]
     assert coc.shape == (3,) and np.ptp(coc) > 0.01 * coc.max()

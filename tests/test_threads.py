@@ -57,6 +57,9 @@ def test_a_count_that_wins_again_is_probed_less_often():
 
 def test_candidates_and_a_single_core():
     assert ThreadTuner(8, print).candidates == [8, 7, 4]
+    busy = ThreadTuner(8, lambda n: None)
+    busy.start(2)  # 6 of 8 cores busy at the start: 2 threads are tried as well
+    assert busy.candidates == [8, 7, 4, 2] and busy.current == 2
     one = ThreadTuner(1, lambda n: pytest.fail("a single core has nothing to tune"))
     assert not one.enabled
     for _ in range(100):

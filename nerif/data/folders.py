@@ -10,7 +10,7 @@ from typing import Optional
 import numpy as np
 
 from nerif.data.phantoms import read_volume
-from nerif.geometry import Camera, ProbeBox, ray_binning
+from nerif.geometry import Camera, ProbeBox, pixels_per_voxel, ray_binning
 from nerif.physics import check_temperature
 from nerif.sensing.imaging import resample
 
@@ -22,10 +22,13 @@ def resolve_binning(setting, cameras: list[Camera], box: Optional[ProbeBox], sen
     :func:`nerif.geometry.ray_binning`, logged), or a whole number that divides every camera's sensor (``sensor``
     names it); one sentence otherwise."""
     if setting == "auto":
-        b = ray_binning(cameras, box)
-        per_voxel = float(np.median([c.pixels_per_mm(np.zeros(3)) for c in cameras])) * box.voxel_mm
+        b, per_voxel = ray_binning(cameras, box), pixels_per_voxel(cameras, box)
         log.info("data.binning=auto: %d x %d pixels a ray (%.1f pixels span a voxel of %g mm at the probe centre)",
                  b, b, per_voxel, box.voxel_mm)
+        if per_voxel > 0 and not 0.5 <= b / per_voxel <= 2.0:
+            log.warning("data.binning=auto: %d x %d pixels a ray is the nearest block that divides %s, but a voxel "
+                        "spans %.1f pixels; set data.binning (or crop the images to a size it divides)",
+                        b, b, sensor, per_voxel)
         return b
     if isinstance(setting, bool) or not isinstance(setting, int) or setting < 1:
         raise ValueError(f"data.binning={setting!r}: auto or a whole number of pixels (at least 1)")

@@ -47,12 +47,20 @@ def view_index(view_start: torch.Tensor) -> torch.Tensor:
     return torch.repeat_interleave(torch.arange(len(view_start) - 1, device=view_start.device), view_start.diff())
 
 
+def pixels_per_voxel(cameras: list[Camera], box: ProbeBox) -> float:
+    """The median over the cameras of the sensor pixels one voxel of ``box`` spans across at the probe centre
+    (cameras that do not face it left out; 0 where none does)."""
+    scale = [cam.pixels_per_mm(np.zeros(3)) for cam in cameras]
+    scale = [s for s in scale if np.isfinite(s) and s > 0]
+    return float(np.median(scale)) * box.voxel_mm if scale else 0.0
+
+
 def ray_binning(cameras: list[Camera], box: ProbeBox) -> int:
     """The binning that puts about one ray per voxel across at the probe centre: the common divisor b of every
-    camera's width and height nearest (in ratio) to the median of the cameras' pixels per voxel there. Finer rays
-    than the voxels only repeat what their neighbours measure; coarser ones average over several voxels (on the
-    shared bunsen capture 8 x 8 pixels span two voxels and give a sigma error of 0.183, 4 x 4 give 0.122)."""
-    per_voxel = float(np.median([cam.pixels_per_mm(np.zeros(3)) for cam in cameras])) * box.voxel_mm
+    camera's width and height nearest (in ratio) to :func:`pixels_per_voxel`. Finer rays than the voxels only
+    repeat what their neighbours measure; coarser ones average over several voxels (on the shared bunsen capture
+    8 x 8 pixels span two voxels and give a sigma error of 0.183, 4 x 4 give 0.122)."""
+    per_voxel = max(pixels_per_voxel(cameras, box), 1e-9)
     common = int(np.gcd.reduce([int(n) for cam in cameras for n in (cam.width, cam.height)]))
     divisors = [b for b in range(1, common + 1) if common % b == 0]
-    return min(divisors, key=lambda b: abs(np.log(b / max(per_voxel, 1e-9))))
+    return min(divisors, key=lambda b: abs(np.log(b / per_voxel)))
