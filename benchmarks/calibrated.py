@@ -32,7 +32,8 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from ablation import header, run_arguments, run_named, write_report  # noqa: E402
-from nerif.data.capture import calibrated_camera, read_calibration, write_calibration  # noqa: E402
+from nerif.data.calibration import calibrated_camera, read_calibration  # noqa: E402
+from nerif.write_capture import write_calibration  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 MULTICAM, ARC = DATA / "independent_capture_bunsen_multicam", DATA / "independent_capture_bunsen"
@@ -72,7 +73,7 @@ def synthetic_capture(root: Path, rig: list[str]) -> Path:
     """Phantom 5 through the realistic chain and ``rig``, written as a capture with its truth (``volume.npz``)."""
     from nerif.configs import compose, group
     from nerif.data import DATASETS
-    from nerif.data.capture import write_capture
+    from nerif.write_capture import write_capture
 
     if not (root / "volume.npz").is_file():
         shutil.rmtree(root, ignore_errors=True)

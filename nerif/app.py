@@ -13,11 +13,10 @@ import torch
 from omegaconf import DictConfig
 
 from nerif.configs import check_complete, group
-from nerif.data.frames import frames_of
 from nerif.io.folders import check_writable, run_folder
 from nerif.memory import check_memory
 from nerif.reconstruct import reconstruct, resuming
-from nerif.sequence import run_sequence
+from nerif.sequence import frames_of, run_sequence
 from nerif.solvers.base import check_train
 from nerif.threads import ThreadTuner, resolve_threads, usable_cores
 

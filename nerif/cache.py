@@ -38,38 +38,68 @@ def module_file(name: str, top: Path = _TOP) -> Optional[Path]:
     return None
 
 
-def _imported(path: Path, top: Path) -> set[str]:
-    """Every ``nerif...`` module a source file runs, read, not run: what it imports (at its top or inside a
-    function; ``from nerif.a import b`` names ``nerif.a`` and ``nerif.a.b``, b may be a module) and, for a
-    :class:`nerif.registry.Registry` it defines, every module of the registry's package (a registry imports them
-    all when a name is first looked up)."""
-    names = set()
+def _read(path: Path) -> dict:
+    """What a source file says of the modules it runs, read, not run: ``imports`` (the ``nerif...`` modules it
+    imports, at its top or inside a function; ``from nerif.a import b`` names ``nerif.a`` and ``nerif.a.b``, b may
+    be a module), ``defines`` (name -> package of each :class:`nerif.registry.Registry` it defines), ``looks_up``
+    (the names whose attributes other than ``register`` it uses: a registry it builds from) and ``registers``
+    (the names whose ``register`` it calls)."""
+    out = {"imports": set(), "defines": {}, "looks_up": set(), "registers": set()}
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
         if isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").split(".")[0] == "nerif":
-            names.add(node.module)
-            names.update(f"{node.module}.{a.name}" for a in node.names)
+            out["imports"].add(node.module)
+            out["imports"].update(f"{node.module}.{a.name}" for a in node.names)
         elif isinstance(node, ast.Import):
-            names.update(a.name for a in node.names if a.name.split(".")[0] == "nerif")
-        elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "Registry":
-            for kw in node.keywords:
+            out["imports"].update(a.name for a in node.names if a.name.split(".")[0] == "nerif")
+        elif isinstance(node, ast.Assign) and isinstance(node.value, ast.Call) \
+                and getattr(node.value.func, "id", None) == "Registry":
+            for kw in node.value.keywords:
                 if kw.arg == "package" and isinstance(kw.value, ast.Constant):
-                    package = module_file(kw.value.value, top)
-                    names.update(f"{kw.value.value}.{p.stem}" for p in package.parent.glob("*.py"))
-    return names
+                    out["defines"].update({t.id: kw.value.value for t in node.targets if isinstance(t, ast.Name)})
+        elif isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+            out["registers" if node.attr == "register" else "looks_up"].add(node.value.id)
+        elif isinstance(node, ast.Compare) and isinstance(node.comparators[0], ast.Name):  # ``name in REGISTRY``
+            out["looks_up"].add(node.comparators[0].id)
+    return out
+
+
+def _package_files(package: str, top: Path) -> list[Path]:
+    """Every source file of ``package`` and of its subpackages (a registry imports them all)."""
+    init = module_file(package, top)
+    return sorted(init.parent.rglob("*.py")) if init is not None and init.name == "__init__.py" else []
+
+
+def _module_name(path: Path, top: Path) -> str:
+    parts = path.relative_to(top).with_suffix("").parts
+    return ".".join(("nerif",) + (parts[:-1] if parts[-1] == "__init__" else parts))
 
 
 def import_closure(roots: Sequence[str], top: Path = _TOP) -> list[Path]:
-    """The source files that the modules ``roots`` run (:func:`_imported`, recursively, with the
-    ``__init__.py`` of every package on the way), as sorted paths in ``top``, the package folder."""
+    """The source files that decide what the modules ``roots`` compute, as sorted paths in ``top``, the package
+    folder: what they import (:func:`_read`, recursively, with the ``__init__.py`` of every package on the way)
+    and, for each registry they look a name up in, the modules of its package (subpackages too) that register into
+    it: a registry imports its whole package, but only what registers into it decides what it builds (an edit to
+    the capture reader leaves the phantoms, built from the same package, as they are)."""
     seen: set[Path] = set()
+    defines: dict[str, str] = {}
+    looks_up: set[str] = set()
+    expanded: set[str] = set()
     todo = list(roots)
     while todo:
-        parts = todo.pop().split(".")
-        for k in range(1, len(parts) + 1):  # the packages on the way, then the module itself
-            path = module_file(".".join(parts[:k]), top)
-            if path is not None and path not in seen:
-                seen.add(path)
-                todo.extend(_imported(path, top))
+        while todo:
+            parts = todo.pop().split(".")
+            for k in range(1, len(parts) + 1):  # the packages on the way, then the module itself
+                path = module_file(".".join(parts[:k]), top)
+                if path is not None and path not in seen:
+                    seen.add(path)
+                    said = _read(path)
+                    todo.extend(said["imports"])
+                    defines.update(said["defines"])
+                    looks_up |= said["looks_up"]
+        for name in sorted((looks_up & defines.keys()) - expanded):
+            expanded.add(name)
+            todo.extend(_module_name(p, top) for p in _package_files(defines[name], top)
+                        if p not in seen and name in _read(p)["registers"])
     return sorted(seen)
 
 

@@ -16,7 +16,6 @@ import torch
 from nerif.data import Scene
 from nerif.losses.images import block_pixels, photometric_residual
 from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
-from nerif.sensing.displacement import deflection_to_displacement, view_displacements
 
 Predict = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (R, 3) origins [mm], dirs -> (R, 3) sigma units
 
@@ -54,7 +53,7 @@ class Evaluation:
             self.heldout_index = fixed_rays(h, eval_rays_per_view, seed + 2)
             self.peaks["deflection"] = value_range(h.eps)  # PSNR peaks: the range of every observation
             if self.physical:
-                self.heldout_displacements = view_displacements(h.eps, h.dirs, h.ray_views(), h.cameras)
+                self.heldout_displacements = h.displacement_px
                 self.peaks["displacement"] = value_range(self.heldout_displacements)
 
     @property
@@ -107,11 +106,11 @@ class Evaluation:
         m = {"heldout_deflection_rmse": deflection_rmse(pred, obs),
              "heldout_psnr_db": psnr_db(pred, obs, self.peaks["deflection"])}
         if self.physical:
-            u_pred = view_displacements(pred, h.dirs[index], h.ray_views()[index], h.cameras)
+            u_pred = h.to_displacement(pred, index)
             u_obs = self.heldout_displacements[index]
             m.update(heldout_displacement_rmse_px=deflection_rmse(u_pred, u_obs),
                      heldout_displacement_psnr_db=psnr_db(u_pred, u_obs, self.peaks["displacement"]))
-        if h.images is not None:
+        if h.image_block() is not None:
             m["heldout_photometric_rmse"] = self.photometric_rmse(index, pred)
             if every:  # what the flow's displacements and none leave, for comparison
                 m["heldout_photometric_rmse_flow"] = self.photometric_rmse(index, obs)
@@ -123,11 +122,11 @@ class Evaluation:
         full range 1], ``u`` the displacement of deflections ``eps`` [rad] (R, 3), the same over each ray's block
         of image pixels: how well the deflections explain the held-out images themselves, whatever the flow says."""
         h = self.scene.heldout
-        views, total, count = h.ray_views()[index], 0.0, 0
+        views, total, count, b = h.ray_views()[index], 0.0, 0, h.image_block()
+        u_all = h.to_displacement(eps.double(), index)  # px of the full sensor
         for v in views.unique().tolist():
             sel, im, cam = views == v, h.images[v], h.cameras[v]
-            b = max(1, cam.binning // im.camera.binning)
-            u = deflection_to_displacement(eps[sel].double(), h.dirs[index[sel]].double(), im.camera)
+            u = u_all[sel] / im.camera.binning  # px of the images' grid
             x = block_pixels(h.pixel[index[sel]], cam.width, b)  # (R, b^2, 2)
             u = u[:, None, :].expand(-1, x.shape[1], -1)
             r = photometric_residual(im.reference.double(), im.distorted.double(), x.reshape(-1, 2), u.reshape(-1, 2))
@@ -140,7 +139,7 @@ class Evaluation:
         predictions [rad] of every held-out ray."""
         h = self.scene.heldout
         obs = self.heldout_displacements if self.physical else h.eps
-        pred = view_displacements(pred, h.dirs, h.ray_views(), h.cameras) if self.physical else pred
+        pred = h.to_displacement(pred) if self.physical else pred
         out = []
         for v in range(h.n_views):
             sl = h.view_slice(v)

@@ -20,12 +20,13 @@ import json
 import logging
 import time
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from nerif.data.frames import Frame
+from nerif.data.frames import FRAMES, Frame
 from nerif.geometry import ProbeBox
 from nerif.io.export import write_json, write_pvd
 from nerif.io.outputs import summary_line
@@ -37,6 +38,13 @@ from nerif.solvers import SOLVERS
 log = logging.getLogger(__name__)
 # a frame's headline metrics: the multirun table's columns, and the held-out PSNR its summary line prints
 FINAL_KEYS = tuple(k for k, _, _ in COLUMNS) + ("heldout_displacement_psnr_db",)
+
+
+def frames_of(data: dict) -> Optional[list[Frame]]:
+    """The frames a ``data`` config asks for, or None for one steady scene (a dataset without frames)."""
+    if data["name"] not in FRAMES:
+        return None
+    return FRAMES.build(data)
 
 
 def frame_folder(frame: Frame) -> str:

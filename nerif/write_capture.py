@@ -14,15 +14,124 @@ import logging
 import shutil
 import sys
 from pathlib import Path
+from typing import Optional
+
+import cv2
+import numpy as np
+import yaml
 
 from hydra.errors import HydraException
 
 from nerif.configs import check_complete, compose, group
 from nerif.data import DATASETS
-from nerif.data.capture import read_rig, write_capture
-from nerif.data.frames import frames_of
+from nerif.sequence import frames_of
+from nerif.data.rig_file import RIG_FILE, RIG_VERSION, read_rig
+from nerif.data.scene import Scene
+from nerif.geometry import Camera
+from nerif.io.export import atomic_write, write_png
+from nerif.sensing.optics import probe_distance_mm
 
 log = logging.getLogger("nerif")
+
+
+def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Optional[list] = None) -> Path:
+    """Write synthetic scenes sensed realistically as a capture folder (8-bit images and ``rig.yaml``).
+
+    Args:
+        scenes: a scene from :func:`nerif.data.synthetic.synthetic` with ``sensing=realistic`` (its images), or an
+            iterable of such scenes of one rig, the frames of a time series at ``times`` [s] (each is written
+            as it comes, to ``frame_KKKK/``); the rig file describes the first scene's cameras.
+        heldout: views never trained on (default: the last).
+    """
+    root = Path(root)
+    series = times is not None
+    scenes = [scenes] if isinstance(scenes, Scene) else scenes
+    listed, first = [], None
+    for k, scene in enumerate(scenes):
+        if scene.sensing is None or "distorted" not in scene.sensing:
+            raise ValueError("writing a capture needs images: use data.sensing=realistic")
+        dist = scene.sensing["distorted"]
+        folder = f"frame_{k:04d}/" if series else ""
+        listed.append([f"{folder}distorted_{v:02d}.png" for v in range(len(dist))])
+        for v, name in enumerate(listed[-1]):
+            write_png(root / name, dist[v])
+        if first is None:
+            first = scene
+            for v, ref in enumerate(scene.sensing["reference"]):
+                write_png(root / f"reference_{v:02d}.png", ref)
+    if first is None or (series and len(listed) != len(times)) or (not series and len(listed) != 1):
+        raise ValueError(f"{len(listed)} scene(s) for {len(times) if series else 1} frame(s)")
+    n, H, W = first.sensing["distorted"].shape
+    if any(c.distortion is not None or c.centre_px is not None or c.aspect != 1.0 for c in first.cameras):
+        if series:
+            raise ValueError("a time series through a calibrated rig is not written yet: write one state at a time")
+        return write_calibrated(first, root, listed[0], heldout)
+    cam = first.cameras[0].unbinned(first.cameras[0].binning)  # the full sensor
+    angles = [round(float(np.degrees(np.arctan2(c.position[0], c.position[2]))), 6) for c in first.cameras]
+    views = {"angles_deg": angles, "references": [f"reference_{v:02d}.png" for v in range(n)]}
+    rig = {"format": "nerif-capture", "version": RIG_VERSION,
+           "camera": {"focal_mm": float(cam.focal_mm), "pitch_um": round(cam.pitch_mm * 1e3 * cam.width / W, 9),
+                      "sensor_px": [W, H], "f_number": float(cam.f_number),
+                      "camera_to_centre_mm": round(probe_distance_mm(cam), 9),
+                      "camera_to_background_mm": float(cam.background_mm)},
+           "views": views if series else {**views, "images": listed[0]}}
+    if series:
+        rig["frames"] = [{"time_s": float(t), "images": images} for t, images in zip(times, listed)]
+    rig.update({"roi_px": [0, 0, W, H],
+                "probe": {"shape": [int(s) for s in first.box.shape], "voxel_mm": float(first.box.voxel_mm)},
+                "ambient": {"T0": float(first.ambient.T0), "n0": float(first.ambient.n0)},
+                "T_max": float(first.ambient.T_max),
+                "temperature_range_K": [float(first.ambient.T0), float(first.ambient.T_max)],
+                "heldout": list(heldout) if heldout is not None else [n - 1]})
+    atomic_write(root / RIG_FILE, lambda t: Path(t).write_text(
+        "# nerif capture rig file (format: docs/captures.md); written from a synthetic scene\n"
+        + yaml.safe_dump(rig, sort_keys=False, default_flow_style=None)))
+    return root
+
+
+def write_calibration(cameras: list[Camera], images: list[str], references: list[str], path: Path) -> Path:
+    """An OpenCV calibration file (:mod:`cv2.FileStorage` YAML, the keys :func:`read_calibration` reads) of
+    ``cameras`` (each on the grid of its images), written atomically."""
+    def write(tmp: str) -> None:
+        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML)
+        fs.write("n_cameras", len(cameras))
+        fs.write("units", "mm")
+        fs.write("world", "probe centre, y up; x, z horizontal")
+        for k, (cam, image, ref) in enumerate(zip(cameras, images, references)):
+            pre = f"camera_{k:02d}_"
+            R = np.asarray(cam.rotation, dtype=np.float64).T  # world to camera
+            fs.write(pre + "image", image)
+            fs.write(pre + "reference", ref)
+            fs.write(pre + "image_size", np.array([cam.width, cam.height], dtype=np.int32))
+            fs.write(pre + "camera_matrix", cam.camera_matrix())
+            fs.write(pre + "dist_coeffs", np.asarray(cam.distortion or (0.0,) * 5, dtype=np.float64)[None])
+            fs.write(pre + "rvec", cv2.Rodrigues(R)[0])
+            fs.write(pre + "tvec", (-R @ np.asarray(cam.position, dtype=np.float64))[:, None])
+            fs.write(pre + "pixel_pitch_mm", float(cam.pitch_mm))
+            fs.write(pre + "background_distance_mm", float(cam.background_mm))
+        fs.release()
+
+    return atomic_write(path, write)
+
+
+def write_calibrated(scene: Scene, root: Path, images: list[str], heldout: Optional[list] = None) -> Path:
+    """The rig file of version 3 and its calibration file, for a scene of calibrated cameras whose images are
+    written (:func:`write_capture`)."""
+    n, H, W = scene.sensing["distorted"].shape
+    cams = [c.unbinned(c.binning) for c in scene.cameras]
+    cams = [c.binned(c.width // W) if c.width != W else c for c in cams]  # the images' grid
+    refs = [f"reference_{v:02d}.png" for v in range(n)]
+    write_calibration(cams, images, refs, root / "calibration.yml")
+    rig = {"format": "nerif-capture", "version": 3, "calibration": "calibration.yml",
+           "probe": {"shape": [int(s) for s in scene.box.shape], "voxel_mm": float(scene.box.voxel_mm)},
+           "ambient": {"T0": float(scene.ambient.T0), "n0": float(scene.ambient.n0)},
+           "T_max": float(scene.ambient.T_max), "f_number": float(cams[0].f_number),
+           "temperature_range_K": [float(scene.ambient.T0), float(scene.ambient.T_max)],
+           "heldout": list(heldout) if heldout is not None else [n - 1]}
+    atomic_write(root / RIG_FILE, lambda t: Path(t).write_text(
+        "# nerif capture rig file, version 3 (format: docs/captures.md); written from a synthetic scene\n"
+        + yaml.safe_dump(rig, sort_keys=False, default_flow_style=None)))
+    return root
 
 
 def target_folder(path: Path, overwrite: bool) -> None:
@@ -84,8 +193,7 @@ def main(argv=None) -> Path:
         print(f"nerif.write_capture: interrupted; {args.path} is as it was", file=sys.stderr, flush=True)
         sys.exit(130)
     rig = read_rig(root)
-    views = len(rig["views"]["angles_deg"])
-    n = len(rig.get("frames", []))
+    views, n = rig.n_views, len(rig.frames) if len(rig.frames) > 1 else 0
     what = f"{n} frame{'s' * (n != 1)} of {views} views" if n else f"{views} views"
     print(f"capture of {what} written to {root}; reconstruct it with: python -m nerif data=capture data.root={root}")
     return root

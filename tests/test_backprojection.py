@@ -194,3 +194,16 @@ def test_the_hull_keeps_a_cut_flame_on_fine_images():
             for r in (0.0, cfg.mask.radius_mm)}
     assert kept[cfg.mask.radius_mm] == 1.0
     assert kept[0.0] < 0.8
+
+
+def test_a_view_whose_pixels_are_unknown_carves_nothing(scene):
+    """``unknown`` pixels (no usable measurement) count as inside a view's mask: a view with an empty mask but every
+    pixel unknown leaves the visual hull of the other views as it is, while the same empty mask measured carves
+    everything."""
+    images = [m.astype(bool) for m in MASKS.build({"name": "2d"}, scene=scene).images]
+    empty = [np.zeros_like(images[0])] + images[1:]
+    unknown = [np.ones_like(images[0])] + [None] * (len(images) - 1)
+    others = back_project(scene.box, scene.cameras[1:], images[1:])
+    assert others.any()
+    np.testing.assert_array_equal(back_project(scene.box, scene.cameras, empty, unknown=unknown), others)
+    assert not back_project(scene.box, scene.cameras, empty).any()

@@ -102,6 +102,24 @@ def test_the_forward_model_is_the_import_closure_of_what_renders_observations(tm
     assert not {"solvers/neural.py", "solvers/base.py", "reconstruct.py", "app.py", "losses/__init__.py"} & files
 
 
+def test_a_registry_brings_the_modules_of_its_package_and_subpackages_that_register_into_it(tmp_path):
+    """Issue 36: the closure collected only a package's top-level modules, and every one of them: a registry looked
+    up brings what registers into it, at any depth, and nothing else of its package."""
+    from nerif.cache import import_closure
+
+    top = tmp_path / "nerif"
+    files = {"__init__.py": "", "reg.py": "from nerif.registry import Registry\nTHINGS = Registry('t', package='nerif.pkg')\n",
+             "user.py": "from nerif.reg import THINGS\nTHINGS.build({'name': 'x'})\n",
+             "pkg/__init__.py": "", "pkg/sub/__init__.py": "",
+             "pkg/sub/leaf.py": "from nerif.reg import THINGS\n@THINGS.register('x')\ndef x():\n    pass\n",
+             "pkg/other.py": "from nerif.registry import Registry\nOTHER = Registry('o', package='nerif.pkg')\n"}
+    for name, text in files.items():
+        (top / name).parent.mkdir(parents=True, exist_ok=True)
+        (top / name).write_text(text)
+    found = {str(p.relative_to(top)) for p in import_closure(["nerif.user"], top)}
+    assert found == {"__init__.py", "user.py", "reg.py", "pkg/__init__.py", "pkg/sub/__init__.py", "pkg/sub/leaf.py"}
+
+
 def test_an_edit_to_a_file_of_the_forward_model_misses_the_cache(tmp_path, monkeypatch):
     import nerif.cache as cache
 
@@ -116,10 +134,12 @@ def test_an_edit_to_a_file_of_the_forward_model_misses_the_cache(tmp_path, monke
     cached_arrays(tmp_path / "c", "obs", {"k": 1}, compute)
     cached_arrays(tmp_path / "c", "obs", {"k": 1}, compute)
     assert len(calls) == 1
-    (top / "solvers" / "neural.py").write_text((top / "solvers" / "neural.py").read_text() + "\n# outside\n")
-    cache._digest.cache_clear()
-    cached_arrays(tmp_path / "c", "obs", {"k": 1}, compute)
-    assert len(calls) == 1  # a file outside the forward model: still a hit
+    # outside the forward model: a solver, and the capture reader (its package also holds the phantoms' registry)
+    for name in ("solvers/neural.py", "data/capture.py", "data/rig_file.py"):
+        (top / name).write_text((top / name).read_text() + "\n# outside\n")
+        cache._digest.cache_clear()
+        cached_arrays(tmp_path / "c", "obs", {"k": 1}, compute)
+    assert len(calls) == 1  # still a hit
     for name in ("renderers/samplers.py", "renderers/deflection.py"):
         (top / name).write_text((top / name).read_text() + "\n# an edit\n")
         cache._digest.cache_clear()  # the code is read once per process: this is the next process

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import yaml
 
-from nerif.data.capture import RIG_FILE, read_rig, rig_cameras
+from nerif.data.capture import rig_cameras
+from nerif.data.rig_file import RIG_FILE, read_rig
 from nerif.geometry import ProbeBox, rays_in_box
 from tests.helpers import shared_data
 
@@ -60,8 +61,8 @@ def test_a_pixels_ray_is_opencvs_and_projects_back_onto_the_pixel(tmp_path):
 def test_the_rig_is_the_calibrations_and_sees_the_probe(tmp_path):
     rig = read_rig(folder(tmp_path))
     full, cams = rig_cameras(rig, 4)
-    assert len(full) == 10 and rig["views"]["images"][3] == "distorted_03.png"
-    assert rig["roi_px"] == [0, 0, 360, 640]
+    assert len(full) == 10 and rig.frames[0].images[3] == "distorted_03.png"
+    assert rig.roi_px == (0, 0, 360, 640)
     for cam in full:  # 740-900 mm from the axis, within 35 mm of the probe's height, looking at its centre
         assert 740 - 1 < np.hypot(cam.position[0], cam.position[2]) < 900 + 1 and abs(cam.position[1]) < 36
         axis = cam.rotation[:, 2]
@@ -93,7 +94,7 @@ def test_a_bad_calibration_is_one_sentence_naming_the_camera_and_key_before_any_
 def test_the_keys_the_data_readme_lists_are_the_keys_nerif_reads():
     import re
 
-    from nerif.data.capture import CALIBRATION_KEYS
+    from nerif.data.calibration import CALIBRATION_KEYS
 
     listed = set(re.findall(r"camera_KK_(\w+)", (multicam() / "README.md").read_text()))
     assert listed == set(CALIBRATION_KEYS)
@@ -121,7 +122,8 @@ def test_a_capture_written_through_a_calibrated_rig_reads_back_its_cameras_and_r
 
     from nerif.configs import compose, group
     from nerif.data import DATASETS
-    from nerif.data.capture import capture, write_capture
+    from nerif.data.capture import capture
+    from nerif.write_capture import write_capture
 
     cfg = compose(["data.sensing=realistic", "rig=calibrated", "rig.n_cameras=4", "rig.binning=8",
                    "phantom=gaussian_blob", "phantom.shape=[16,16,16]", "phantom.voxel_mm=3.0", "phantom.width_mm=7.0",

@@ -138,7 +138,7 @@ def test_on_a_tiny_capture_training_on_the_images_ends_closer_to_the_truth_than_
     from omegaconf import OmegaConf
 
     from nerif.app import run
-    from nerif.data.capture import write_capture
+    from nerif.write_capture import write_capture
 
     cfg = tiny_config("rig.width_px=240", "rig.height_px=320", "rig.binning=8", "phantom.shape=[16,16,16]",
                       "phantom.voxel_mm=2.0", "phantom.width_mm=3.0", "data.sensing=realistic", "rig.n_cameras=7",

@@ -25,13 +25,24 @@ def test_deflection_displacement_round_trip_is_exact(view):
     torch.testing.assert_close(back, eps, atol=1e-17, rtol=1e-12)
 
 
-def test_view_displacements_are_in_sensor_pixels_whatever_the_binning():
-    from nerif.sensing.displacement import view_displacements
+def test_a_scenes_displacements_are_in_sensor_pixels_whatever_the_binning():
+    """``Scene.to_displacement``: the full sensor's pixels for rays of binned cameras, as the full-sensor camera
+    maps them, and back to the deflections by ``displacement_to_deflection``."""
+    from nerif.data.scene import Scene
+    from nerif.geometry import ProbeBox, rays_in_box
+    from nerif.physics import Ambient
 
-    full, binned = arc_rig(n_cameras=2, binning=1), arc_rig(n_cameras=2, binning=8)
-    d = torch.stack([full[0].pixel_directions()[1000], full[1].pixel_directions()[5000]])
-    eps = torch.tensor([[1e-4, 2e-4, 0.0], [0.0, -1e-4, 3e-5]], dtype=torch.float64)
-    views = torch.tensor([0, 1])
-    u_full = view_displacements(eps, d, views, full)
-    assert torch.allclose(view_displacements(eps, d, views, binned), u_full)
-    assert torch.allclose(u_full[0], deflection_to_displacement(eps[:1], d[:1], full[0])[0])
+    box = ProbeBox((16, 16, 16), 2.0)
+    binned = arc_rig(n_cameras=2, binning=8)
+    origins, d, pixel, starts = rays_in_box(box, binned)
+    g = torch.Generator().manual_seed(3)
+    eps = torch.randn(len(d), 3, dtype=torch.float64, generator=g) * 1e-4
+    eps = eps - (eps * d.double()).sum(-1, keepdim=True) * d.double()
+    scene = Scene(box, Ambient(293.0, 1.000277, 2000.0), binned, origins, d, eps.float(), pixel, starts)
+    u = scene.to_displacement(eps)
+    full = arc_rig(n_cameras=2, binning=1)
+    for v in range(2):
+        sl = scene.view_slice(v)
+        torch.testing.assert_close(u[sl], deflection_to_displacement(eps[sl], d[sl].double(), full[v]))
+        torch.testing.assert_close(displacement_to_deflection(u[sl], d[sl].double(), full[v]), eps[sl])
+    assert float(u.abs().max()) > 1.0  # 1e-4 rad is pixels on this rig: the test compares something

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from nerif.data import DATASETS
-from nerif.data.frames import Frame, frames_of, pick_frames
+from nerif.data.frames import Frame, pick_frames
+from nerif.sequence import frames_of
 from tests.helpers import tiny_config
 from nerif.configs import group
 

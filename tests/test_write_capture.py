@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 import yaml
 
-from nerif.data.capture import RIG_FILE, capture_files, read_rig
+from nerif.data.capture_images import capture_files
+from nerif.data.rig_file import RIG_FILE, read_rig
 from nerif.write_capture import main
 
 SMALL = ["rig.width_px=240", "rig.height_px=320", "rig.binning=8", "rig.n_cameras=3", "rig.distance_mm=700",
@@ -16,13 +17,13 @@ def test_the_rig_file_describes_the_cameras_that_took_the_images(tmp_path, capsy
     root = main([str(tmp_path / "cap"), *SMALL])
     assert "python -m nerif data=capture data.root=" in capsys.readouterr().out
     rig = read_rig(root)
-    cam = rig["camera"]
-    assert cam["sensor_px"] == [240, 320] and cam["focal_mm"] == 105.0 and cam["f_number"] == 16.0
-    assert cam["pitch_um"] == pytest.approx(20.0)  # images on the full sensor
-    assert cam["camera_to_centre_mm"] == pytest.approx(700.0) and cam["camera_to_background_mm"] == pytest.approx(1200.0)
-    assert rig["views"]["angles_deg"] == pytest.approx([0.0, 82.5, 165.0]) and rig["heldout"] == [2]
-    assert rig["probe"] == {"shape": [16, 16, 16], "voxel_mm": 2.0}
-    distorted, references = capture_files(root, rig)
+    lens = rig.lens
+    assert rig.sensor_px == (240, 320) and lens.focal_mm == 105.0 and lens.f_number == 16.0
+    assert lens.pitch_um == pytest.approx(20.0)  # images on the full sensor
+    assert lens.camera_to_centre_mm == pytest.approx(700.0) and lens.camera_to_background_mm == pytest.approx(1200.0)
+    assert rig.angles_deg == pytest.approx([0.0, 82.5, 165.0]) and rig.heldout == (2,)
+    assert rig.box.shape == (16, 16, 16) and rig.box.voxel_mm == 2.0
+    distorted, references = capture_files(rig)
     assert len(distorted) == len(references) == 3
     assert yaml.safe_load((root / RIG_FILE).read_text())["T_max"] == 2000.0
     import cv2
@@ -39,10 +40,10 @@ def test_a_time_series_is_written_frame_by_frame(tmp_path, capsys):
     root = main([str(tmp_path / "series"), *over])
     assert "capture of 2 frames of 3 views" in capsys.readouterr().out
     rig = read_rig(root)
-    assert [f["time_s"] for f in rig["frames"]] == pytest.approx([0.0, 1 / 24])
-    assert rig["frames"][1]["images"] == [f"frame_0001/distorted_{v:02d}.png" for v in range(3)]
-    d0, refs = capture_files(root, rig, 0)
-    d1, refs1 = capture_files(root, rig, 1)
+    assert [f.time_s for f in rig.frames] == pytest.approx([0.0, 1 / 24])
+    assert rig.frames[1].images == tuple(f"frame_0001/distorted_{v:02d}.png" for v in range(3))
+    d0, refs = capture_files(rig, 0)
+    d1, refs1 = capture_files(rig, 1)
     assert refs == refs1 and all(p.is_file() for p in d0 + d1)
     import cv2
 

@@ -46,9 +46,3 @@ def pick_frames(setting, available: Optional[int] = None) -> list[int]:
         raise ValueError(f"data.frames={setting}: the data hold {available} frame(s), numbered 0 to {available - 1}")
     return picked
 
-
-def frames_of(data: dict) -> Optional[list[Frame]]:
-    """The frames a ``data`` config asks for, or None for one steady scene (a dataset without frames)."""
-    if data["name"] not in FRAMES:
-        return None
-    return FRAMES.build(data)

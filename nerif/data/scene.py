@@ -6,6 +6,7 @@ from one view is one slice and one random index, on any device.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Optional
 
 import numpy as np
@@ -15,6 +16,7 @@ from nerif.geometry import Camera, ProbeBox, rays_in_box, view_index
 from nerif.physics import Ambient
 from nerif.registry import Registry
 from nerif.renderers.deflection import perpendicular
+from nerif.sensing.displacement import displacement_matrix, displacement_to_deflection
 
 DATASETS = Registry("dataset", package="nerif.data")
 
@@ -62,6 +64,11 @@ class Scene:
         sigma_prior: (a, b) interval of sigma the data say the field lies in, else None (the field's default).
         images: per view, the reference and distorted background images (:class:`ViewImages`) where the data
             have them (captures, realistic sensing), else None.
+        displacements: (N, 2) the image displacements measured for each ray [px of the full sensor] where the data
+            were measured as displacements (captures), else None (:attr:`displacement_px` derives them).
+        valid_images: per view, (height, width) bool on the ray grid: the pixels with a usable measurement, where
+            the data lack some (a region of interest, a flow without an estimate), else None (every pixel). Any
+            other pixel is unknown: it has no ray, carves no visual hull and counts as no ambient.
         observed: (N, 3) the observations in the unit the solvers fit, deflections of sigma: ``eps / scale``
             (derived, computed once).
     """
@@ -81,6 +88,8 @@ class Scene:
     heldout: Optional["Scene"] = None
     sigma_prior: Optional[tuple] = None
     images: Optional[list] = None
+    displacements: Optional[torch.Tensor] = None
+    valid_images: Optional[list] = None
     observed: torch.Tensor = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -94,6 +103,42 @@ class Scene:
     @property
     def n_views(self) -> int:
         return len(self.cameras)
+
+    @cached_property
+    def gain(self) -> torch.Tensor:
+        """(N, 2, 3) float64: each ray's image displacement [px of the full sensor] per radian of deflection
+        (:func:`nerif.sensing.displacement.displacement_matrix`), built once."""
+        out = self.dirs.new_zeros(len(self.dirs), 2, 3, dtype=torch.float64)
+        for v, cam in enumerate(self.cameras):
+            sl = self.view_slice(v)
+            out[sl] = displacement_matrix(self.dirs[sl].double(), cam.unbinned(cam.binning))
+        return out
+
+    def to_displacement(self, eps: torch.Tensor, index: Optional[torch.Tensor] = None) -> torch.Tensor:
+        """(R, 3) deflections [rad] of the rays ``index`` (default: all) -> (R, 2) image displacements [px of the
+        full sensor]."""
+        gain = self.gain if index is None else self.gain[index]
+        return (gain @ eps.double()[..., None])[..., 0].to(eps.dtype)
+
+    @cached_property
+    def displacement_px(self) -> torch.Tensor:
+        """(N, 2) the observed image displacements [px of the full sensor]: as measured, or those of ``eps``."""
+        return self.displacements if self.displacements is not None else self.to_displacement(self.eps)
+
+    def image_block(self) -> Optional[int]:
+        """Image pixels a ray spans across (the ray grid's binning over the images' grid; the one place this ratio
+        is taken): a whole number, the same for every view; None where the scene has no images or a view's rays are
+        not a whole number of image pixels apart."""
+        if self.images is None:
+            return None
+        blocks = {divmod(cam.binning, im.camera.binning) for cam, im in zip(self.cameras, self.images)}
+        b, rest = next(iter(blocks))
+        return b if len(blocks) == 1 and not rest and b >= 1 else None
+
+    def unknown_image(self, view: int) -> Optional[np.ndarray]:
+        """(height, width) bool: the pixels of ``view`` without a usable measurement, or None where every pixel
+        has one."""
+        return None if self.valid_images is None else ~np.asarray(self.valid_images[view], dtype=bool)
 
     def view_slice(self, view: int) -> slice:
         """The rays of ``view`` in ``dirs``, ``eps`` and ``pixel``."""
@@ -115,11 +160,13 @@ class Scene:
         idx = torch.cat([torch.arange(int(self.view_start[v]), int(self.view_start[v + 1]), device=dev) for v in vs])
         counts = torch.tensor([int(self.view_start[v + 1] - self.view_start[v]) for v in vs], device=dev)
         starts = torch.cat([counts.new_zeros(1), counts.cumsum(0)])
-        masks = [self.mask_images[v] for v in vs] if self.mask_images is not None else None
-        images = [self.images[v] for v in vs] if self.images is not None else None
+        def pick(per_view):
+            return [per_view[v] for v in vs] if per_view is not None else None
+
         return replace(self, cameras=[self.cameras[v] for v in vs], origins=self.origins[vs], dirs=self.dirs[idx],
-                       eps=self.eps[idx], pixel=self.pixel[idx], view_start=starts, mask_images=masks, heldout=None,
-                       sensing=None, images=images)
+                       eps=self.eps[idx], pixel=self.pixel[idx], view_start=starts, mask_images=pick(self.mask_images),
+                       heldout=None, sensing=None, images=pick(self.images), valid_images=pick(self.valid_images),
+                       displacements=self.displacements[idx] if self.displacements is not None else None)
 
     def split_views(self, heldout) -> "Scene":
         """The scene of every view but ``heldout``, with those as its ``heldout`` scene (none: every view)."""
@@ -141,8 +188,35 @@ class Scene:
     def to(self, device) -> "Scene":
         return replace(self, origins=self.origins.to(device), dirs=self.dirs.to(device), eps=self.eps.to(device),
                        pixel=self.pixel.to(device), view_start=self.view_start.to(device),
+                       displacements=self.displacements.to(device) if self.displacements is not None else None,
                        heldout=self.heldout.to(device) if self.heldout is not None else None,
                        images=[im.to(device) for im in self.images] if self.images is not None else None)
+
+
+def _gathered(rays: tuple, images: list[np.ndarray], valid: list[np.ndarray], cameras: list[Camera],
+              box: ProbeBox):
+    """Per-pixel ``images`` (per view, (height, width, C)) at each ray of ``rays`` (origins, dirs, pixel,
+    view_start), and the rays kept: those whose pixel is ``valid`` with finite values; one sentence for a view left
+    with no ray. Returns (origins, dirs, values (N, C), pixel, view_start) of the kept rays."""
+    origins, dirs, pixel, view_start = rays
+    device = dirs.device
+
+    def per_ray(per_view, dtype):
+        out = []
+        for v, img in enumerate(per_view):
+            img = np.asarray(img)
+            flat = torch.as_tensor(img.reshape(img.shape[0] * img.shape[1], *img.shape[2:]), dtype=dtype, device=device)
+            out.append(flat[pixel[view_start[v]:view_start[v + 1]]])
+        return torch.cat(out)
+
+    values, keep = per_ray(images, torch.float64), per_ray(valid, torch.bool)
+    keep &= torch.isfinite(values).all(-1)
+    dirs, values, pixel, view_start = keep_rays(dirs, values, pixel, view_start, keep)
+    for v, n in enumerate(view_start.diff().tolist()):
+        if n == 0:
+            raise ValueError(f"{cameras[v].name}: no pixel of its region of interest sees the probe box "
+                             f"{box.extent_mm.tolist()} mm: check the region of interest, the pose and the probe box")
+    return origins, dirs, values, pixel, view_start
 
 
 def scene_from_images(box: ProbeBox, ambient: Ambient, cameras: list[Camera], eps_images: list[np.ndarray],
@@ -158,19 +232,32 @@ def scene_from_images(box: ProbeBox, ambient: Ambient, cameras: list[Camera], ep
         fields: further :class:`Scene` fields (``mask_images``, ``heldout``, ``sensing``).
     Raises a clear error for a view with no valid pixel on the box.
     """
-    origins, dirs, pixel, view_start = rays_in_box(box, cameras, device) if rays is None else rays
-    eps = torch.cat([torch.as_tensor(img.reshape(-1, 3), dtype=torch.float32, device=device)[pixel[view_start[v]:view_start[v + 1]]]
-                     for v, img in enumerate(eps_images)])
-    keep = torch.cat([torch.as_tensor(ok.reshape(-1), device=device)[pixel[view_start[v]:view_start[v + 1]]]
-                      for v, ok in enumerate(valid)])
-    keep &= torch.isfinite(eps).all(-1)
-    dirs, eps, pixel, view_start = keep_rays(dirs, eps, pixel, view_start, keep)
-    for v, n in enumerate(view_start.diff().tolist()):
-        if n == 0:
-            raise ValueError(f"{cameras[v].name}: no pixel of its region of interest sees the probe box "
-                             f"{box.extent_mm.tolist()} mm: check the region of interest, the pose and the probe box")
+    rays = rays_in_box(box, cameras, device) if rays is None else rays
+    origins, dirs, eps, pixel, view_start = _gathered(rays, eps_images, valid, cameras, box)
+    eps = eps.float()
+    known = [np.asarray(ok, dtype=bool) & np.isfinite(e).all(-1) for ok, e in zip(valid, eps_images)]
     return Scene(box, ambient, cameras, origins, dirs, perpendicular(eps, dirs), pixel, view_start,
-                 perpendicular_only=True, **fields)
+                 perpendicular_only=True, valid_images=known, **fields)
+
+
+def scene_from_displacements(box: ProbeBox, ambient: Ambient, cameras: list[Camera], displacements: list[np.ndarray],
+                             valid: list[np.ndarray], device="cpu", rays: Optional[tuple] = None, **fields) -> Scene:
+    """A scene of measured image displacements (:class:`nerif.sensing.measurement.ViewMeasurement`): per view, the
+    pixels that are ``valid`` and whose ray crosses the box, each ray's displacement kept (``Scene.displacements``)
+    and turned into its deflection once.
+
+    Args:
+        displacements: per view, (height, width, 2) displacements [px of the full sensor] on the ray grid.
+        valid: per view, (height, width) bool: the pixels with a usable measurement.
+        rays, fields: as for :func:`scene_from_images`.
+    """
+    rays = rays_in_box(box, cameras, device) if rays is None else rays
+    origins, dirs, u, pixel, view_start = _gathered(rays, displacements, valid, cameras, box)
+    eps = torch.cat([displacement_to_deflection(u[view_start[v]:view_start[v + 1]],
+                                                dirs[view_start[v]:view_start[v + 1]].double(),
+                                                cam.unbinned(cam.binning)) for v, cam in enumerate(cameras)])
+    return Scene(box, ambient, cameras, origins, dirs, eps.float(), pixel, view_start, perpendicular_only=True,
+                 displacements=u.float(), valid_images=[np.asarray(ok, dtype=bool) for ok in valid], **fields)
 
 
 def hot_evidence(scene: Scene) -> float:
@@ -225,6 +312,18 @@ def heldout_views(heldout, n_views: int) -> list[int]:
     if len(held) >= n_views:
         raise ValueError(f"all {n_views} views are held out: at least one must be trained on")
     return held
+
+
+def kept_pixels(cameras: list[Camera], pixel: torch.Tensor, view_start: torch.Tensor, keep: torch.Tensor) -> list:
+    """Per view, (height, width) bool: False at the pixels of the rays ``keep`` (N,) leaves out (their measurement
+    is unusable), True elsewhere."""
+    out, keep, pixel = [], keep.cpu().numpy(), pixel.cpu().numpy()
+    for v, cam in enumerate(cameras):
+        sl = slice(int(view_start[v]), int(view_start[v + 1]))
+        ok = np.ones(cam.height * cam.width, bool)
+        ok[pixel[sl][~keep[sl]]] = False
+        out.append(ok.reshape(cam.height, cam.width))
+    return out
 
 
 def keep_rays(dirs, eps, pixel, view_start, keep: torch.Tensor):

@@ -11,7 +11,7 @@ from nerif.cache import cached_arrays, content_digest
 from nerif.data.folders import finite_or_masked
 from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.phantoms import PHANTOMS
-from nerif.data.scene import DATASETS, Scene, ViewImages, keep_rays
+from nerif.data.scene import DATASETS, Scene, ViewImages, keep_rays, kept_pixels
 from nerif.geometry import RIGS, rays_in_box
 from nerif.physics import Ambient
 from nerif.sensing.models import SENSING
@@ -91,7 +91,9 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
     eps = torch.as_tensor(arrays["eps"], device=device)
     record = {k[len("sensing/"):]: v for k, v in arrays.items() if k.startswith("sensing/")} or None
     keep = torch.as_tensor(finite_or_masked(eps.cpu().numpy(), f"{sensing} sensing"), device=device)
-    if not keep.all():
+    valid = None
+    if not keep.all():  # a pixel the flow gave no estimate for is unknown
+        valid = kept_pixels(cameras, pixel, view_start, keep)
         dirs, eps, pixel, view_start = keep_rays(dirs, eps, pixel, view_start, keep)
     measured_only = sensing != "ideal"  # every sensing but ideal goes through image displacements
     if deflection_noise > 0:  # each frame of a series has noise of its own, as each exposure does
@@ -104,7 +106,7 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
                              torch.as_tensor(record["distorted"][v] / 255.0, dtype=torch.float32, device=device),
                              cam.unbinned(cam.binning).binned(binning)) for v, cam in enumerate(cameras)]
     return Scene(ph.box, ambient, cameras, origins, dirs, eps.to(device), pixel, view_start, ph.T, record,
-                 perpendicular_only=measured_only, images=images)
+                 perpendicular_only=measured_only, images=images, valid_images=valid)
 
 
 def with_noise(eps: torch.Tensor, dirs: Optional[torch.Tensor], fraction: float, seed: int) -> torch.Tensor:

@@ -122,21 +122,32 @@ def masks_2d(scene, threshold: float = 0.001, radius_px: int = 2, noise_sigmas: 
     return out
 
 
-def back_project(box: ProbeBox, cameras, images: list[np.ndarray], n_cameras_required: int | None = None) -> np.ndarray:
+def back_project(box: ProbeBox, cameras, images: list[np.ndarray], n_cameras_required: int | None = None,
+                 unknown: list | None = None) -> np.ndarray:
     """3-D mask: voxels whose centre projects inside the 2-D masks of at least ``n_cameras_required`` views
-    (default: all, the visual hull). Returns (nx, ny, nz) bool."""
+    (default: all, the visual hull). ``unknown``: per view, (height, width) bool pixels without a measurement, or
+    None: a voxel that projects onto one is not carved by that view (no measurement says it is ambient).
+    Returns (nx, ny, nz) bool."""
     need = len(cameras) if n_cameras_required is None else int(n_cameras_required)
     if not 1 <= need <= len(cameras):
         raise ValueError(f"n_cameras_required must be within 1..{len(cameras)}, got {need}")
     centres = box.centres().reshape(-1, 3)
     count = np.zeros(len(centres), dtype=np.int32)
-    for cam, img in zip(cameras, images):
+    for v, (cam, img) in enumerate(zip(cameras, images)):
+        if unknown is not None and unknown[v] is not None:
+            img = np.asarray(img, dtype=bool) | unknown[v]
         uv = np.floor(cam.project(centres)).astype(np.int64)
         ok = (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
         hit = np.zeros(len(centres), dtype=bool)
         hit[ok] = img[uv[ok, 1], uv[ok, 0]]
         count += hit
     return (count >= need).reshape(box.shape)
+
+
+def unknown_images(scene) -> list:
+    """Per view, (height, width) bool: the pixels without a usable measurement (:meth:`Scene.unknown_image`), or
+    None for a view where every pixel has one."""
+    return [scene.unknown_image(v) for v in range(scene.n_views)]
 
 
 def crossed_faces(hull: np.ndarray, min_cover: float) -> list[str]:
@@ -170,7 +181,7 @@ def ambient_faces(setting, scene, masks: Masks, min_cover: float, fallback) -> t
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # an empty view is reported by the masks that use it
                 images = masks_2d(scene)
-        hull = back_project(scene.box, scene.cameras, images)
+        hull = back_project(scene.box, scene.cameras, images, unknown=unknown_images(scene))
     crossed = crossed_faces(hull, min_cover)
     if setting == "auto":
         ambient = [f for f in FACES if f not in crossed]
@@ -216,8 +227,9 @@ def mask_3d(scene, threshold: float = 0.001, radius_px: int = 2, noise_sigmas: f
     images = masks_2d(scene, threshold, radius_px, noise_sigmas, radius_mm)
     seeing = [v for v, m in enumerate(images) if m.any()]
     need = None if n_cameras_required is None else max(1, int(n_cameras_required) - (len(images) - len(seeing)))
-    volume = back_project(scene.box, [scene.cameras[v] for v in seeing], [images[v] for v in seeing], need) \
-        if seeing else np.zeros(scene.box.shape, bool)
+    unknown = unknown_images(scene)
+    volume = back_project(scene.box, [scene.cameras[v] for v in seeing], [images[v] for v in seeing], need,
+                          [unknown[v] for v in seeing]) if seeing else np.zeros(scene.box.shape, bool)
     if not volume.any():
         raise ValueError("the 3-D mask is empty: no voxel lies inside enough 2-D masks (lower mask.threshold, "
                          "raise mask.radius_px / mask.radius_mm or lower mask.n_cameras_required)")

@@ -95,9 +95,6 @@ class OccupancySampler(UniformSampler):
         self.bits.copy_(pack_bits(self.density > self.threshold))
         self.updates += 1
 
-    def occupancy_fraction(self) -> float:
-        return float(unpack_bits(self.bits).float().mean())
-
     # --- sampling ---
     def forward(self, box, origins: torch.Tensor, dirs: torch.Tensor,
                 generator: Optional[torch.Generator] = None) -> Samples:

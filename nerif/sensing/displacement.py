@@ -44,13 +44,3 @@ def displacement_to_deflection(u: torch.Tensor, dirs: torch.Tensor, camera: Came
     rhs = torch.cat([u.double(), torch.zeros_like(u[:, :1], dtype=torch.float64)], -1)
     return torch.linalg.solve(M, rhs[..., None])[..., 0].to(u.dtype)
 
-
-def view_displacements(eps: torch.Tensor, dirs: torch.Tensor, views: torch.Tensor, cameras: list[Camera]) -> torch.Tensor:
-    """(N, 3) deflections [rad] of rays of several cameras (``views`` (N,): the camera of each) -> (N, 2)
-    displacements in pixels of the full sensor (whatever the cameras' binning)."""
-    u = eps.new_zeros(len(eps), 2)
-    for v, cam in enumerate(cameras):
-        sel = views == v
-        if sel.any():
-            u[sel] = deflection_to_displacement(eps[sel], dirs[sel], cam.unbinned(cam.binning))
-    return u

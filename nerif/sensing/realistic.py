@@ -3,8 +3,9 @@
 Per view: finite-aperture rendering of the deflections (``aperture_rays`` rays per pixel from points across
 the lens to the background point the pixel is focused on, averaged: the probe is seen blurred by the circle
 of confusion), conversion to image displacements, a seeded background pattern warped by them, diffraction
-blur and sensor noise on the distorted and the reference image, optical flow between the two, and the
-estimated displacements converted back to world-frame deflections on the training rays.
+blur and sensor noise on the distorted and the reference image, then the measurement stage a capture goes through
+(:func:`nerif.sensing.measurement.measure_view`: the optical flow, block means to the training grid, validity), and
+the estimated displacements converted back to world-frame deflections on the training rays.
 
 Three pixel grids, all of the same sensor: the *image* grid (``image_binning``, 1 = full sensor) on which
 patterns, warping and flow happen; the *render* grid (``render_binning``) on which the aperture-averaged
@@ -25,6 +26,7 @@ from nerif.geometry import Camera, ProbeBox
 from nerif.renderers.voxel import line_integral, voxel_deflection
 from nerif.sensing.displacement import deflection_to_displacement, displacement_to_deflection
 from nerif.sensing.flow import FLOW
+from nerif.sensing.measurement import measure_view
 from nerif.sensing.imaging import add_noise, diffraction_blur, resample, to_uint8, warp
 from nerif.sensing.models import SENSING
 from nerif.sensing.optics import aperture_points, aperture_rays, circle_of_confusion
@@ -55,6 +57,56 @@ def aperture_deflection(delta: torch.Tensor, box: ProbeBox, camera: Camera, dirs
     return torch.cat(out) if out else delta.new_zeros(0, 3)
 
 
+def true_displacements(delta: torch.Tensor, box: ProbeBox, render_camera: Camera, image_camera: Camera,
+                       dirs: torch.Tensor, n_rays: int, step_mm: float, cache_dir, field_key: str) -> np.ndarray:
+    """(h, w, 2) float32 displacements [px of ``image_camera``'s images] of the aperture-averaged deflections
+    (:func:`aperture_deflection`) on ``render_camera``'s grid (``dirs`` (h w, 3) its chief rays), cached by the
+    field (``field_key``), the box, the step, the aperture rays and every attribute of the camera."""
+    eps = cached_arrays(cache_dir, "aperture", {
+        "delta": field_key, "box": [box.shape, box.voxel_mm], "step": step_mm, "rays": n_rays,
+        "camera": render_camera.fingerprint()},
+        lambda: {"eps": aperture_deflection(delta, box, render_camera, dirs, n_rays, step_mm).cpu().numpy()})["eps"]
+    eps = torch.as_tensor(eps, dtype=torch.float64, device=dirs.device)  # the cache gives it back on the CPU
+    u = deflection_to_displacement(eps, dirs, image_camera).cpu().numpy().astype(np.float32)
+    return u.reshape(render_camera.height, render_camera.width, 2)
+
+
+def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_variance: float, gain_drift: float,
+              glow: Optional[np.ndarray], generator: torch.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """The reference and the distorted exposure of one view.
+
+    Args:
+        background: (H, W) the pattern, intensities in [0, 1]. u: (H, W, 2) displacements [px of these images].
+        blur_px: the diffraction spot's diameter [px]. noise_variance: of the additive Gaussian noise on each.
+        gain_drift: the distorted exposure's brightness over the reference's, less 1.
+        glow: (H, W) the flame's own light on the distorted exposure, as a fraction of the background's mean
+            brightness, or None.
+    Returns: (H, W) reference and distorted images (floats, noise drawn from ``generator``: reference first).
+    """
+    reference = add_noise(diffraction_blur(background, blur_px), noise_variance, generator).numpy()
+    distorted = diffraction_blur(warp(background, u), blur_px) * (1.0 + gain_drift)
+    if glow is not None:
+        distorted = distorted + float(background.mean()) * torch.as_tensor(glow)
+    return reference, add_noise(distorted, noise_variance, generator).numpy()
+
+
+def check_settings(camera: Camera, rig_binning: int, pattern: dict, flow: dict, aperture_rays: int,
+                   noise_variance: float, image_binning: int, render_binning: int, luminosity: float,
+                   gain_drift: float) -> None:
+    """One sentence for a setting of :func:`realistic` that cannot run (``camera``: a training camera)."""
+    PATTERNS.get(pattern["name"]), FLOW.get(flow["name"])
+    if noise_variance < 0:
+        raise ValueError(f"noise variance must be >= 0, got {noise_variance}")
+    if not luminosity >= 0 or not gain_drift > -1:
+        raise ValueError(f"data.sensor.luminosity={luminosity} must be at least 0 and data.sensor.gain_drift="
+                         f"{gain_drift} above -1")
+    aperture_points(aperture_rays, 1.0)
+    for b, what in ((image_binning, "image_binning"), (render_binning, "render_binning")):
+        if b < 1 or rig_binning % b and b % rig_binning:
+            raise ValueError(f"data.sensor.{what}={b} must divide or be a multiple of the rig's binning {rig_binning}")
+        camera.unbinned(rig_binning).binned(b)
+
+
 @SENSING.register("realistic")
 def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: torch.Tensor, pixel: torch.Tensor,
               view_start: torch.Tensor, step_mm: Optional[float], rig_binning: int, pattern: dict, flow: dict,
@@ -83,18 +135,8 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         training grid; ``displacement_rmse_px`` over the training rays; ``circle_of_confusion_px`` (V,) [image px].
     """
     render_binning = render_binning or rig_binning
-    # every check before the long work
-    PATTERNS.get(pattern["name"]), FLOW.get(flow["name"])
-    if noise_variance < 0:
-        raise ValueError(f"noise variance must be >= 0, got {noise_variance}")
-    if not luminosity >= 0 or not gain_drift > -1:
-        raise ValueError(f"data.sensor.luminosity={luminosity} must be at least 0 and data.sensor.gain_drift="
-                         f"{gain_drift} above -1")
-    aperture_points(aperture_rays, 1.0)
-    for b, what in ((image_binning, "image_binning"), (render_binning, "render_binning")):
-        if b < 1 or rig_binning % b and b % rig_binning:
-            raise ValueError(f"data.sensor.{what}={b} must divide or be a multiple of the rig's binning {rig_binning}")
-        cameras[0].unbinned(rig_binning).binned(b)
+    check_settings(cameras[0], rig_binning, pattern, flow, aperture_rays, noise_variance, image_binning, render_binning,
+                   luminosity, gain_drift)  # every check before the long work
     step_mm = step_mm or box.voxel_mm
     field_key = hashlib.sha256(delta.cpu().numpy().tobytes()).hexdigest()
     eps_obs = torch.empty(len(dirs), 3, dtype=torch.float32)
@@ -105,35 +147,26 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         ren_cam = cam.unbinned(rig_binning).binned(render_binning)
         H, W = img_cam.height, img_cam.width
         d_ren = ren_cam.pixel_directions(torch.float64).to(delta.device)
-        eps_ren = torch.as_tensor(cached_arrays(cache_dir, "aperture", {
-            "delta": field_key, "box": [box.shape, box.voxel_mm], "step": step_mm, "rays": aperture_rays,
-            "camera": ren_cam.fingerprint()},
-            lambda: {"eps": aperture_deflection(delta, box, ren_cam, d_ren, aperture_rays, step_mm).cpu().numpy()},
-        )["eps"], dtype=torch.float64, device=d_ren.device)  # the cache gives it back on the CPU
-        u_ren = deflection_to_displacement(eps_ren, d_ren, img_cam).cpu().numpy().astype(np.float32)
-        u_ren = u_ren.reshape(ren_cam.height, ren_cam.width, 2)
-
-        coc = circle_of_confusion(img_cam, wavelength_um)
-        gen = torch.Generator().manual_seed(seed * 1009 + v)
-        background = torch.as_tensor(PATTERNS.build(pattern, height=H, width=W, seed=seed * 1009 + v))
-        u_img = torch.as_tensor(resample(u_ren, H, W))
-        d_diff = coc["d_diff_mm"] / img_cam.pitch_mm
-        reference = add_noise(diffraction_blur(background, d_diff), noise_variance, gen).numpy()
-        distorted = diffraction_blur(warp(background, u_img), d_diff) * (1.0 + gain_drift)
-        if luminosity > 0:  # the flame's own light, on the distorted exposure only
+        u_ren = true_displacements(delta, box, ren_cam, img_cam, d_ren, aperture_rays, step_mm, cache_dir, field_key)
+        glow = None
+        if luminosity > 0:  # the flame's own light: the line integral of |delta| along each pixel's ray
             glow = line_integral(delta.abs()[None], box, torch.as_tensor(ren_cam.position, dtype=delta.dtype,
                                  device=delta.device).expand(len(d_ren), 3), d_ren.to(delta.dtype), step_mm)
             glow = resample(glow.reshape(ren_cam.height, ren_cam.width).cpu().numpy().astype(np.float32), H, W)
-            distorted = distorted + luminosity * float(background.mean()) * torch.as_tensor(glow) / max(float(glow.max()), 1e-30)
-        distorted = add_noise(distorted, noise_variance, gen).numpy()
-        u_est = FLOW.build(flow, distorted=distorted, reference=reference)
+            glow = luminosity * glow / max(float(glow.max()), 1e-30)
+        coc = circle_of_confusion(img_cam, wavelength_um)
+        background = torch.as_tensor(PATTERNS.build(pattern, height=H, width=W, seed=seed * 1009 + v))
+        reference, distorted = exposures(background, torch.as_tensor(resample(u_ren, H, W)),
+                                         coc["d_diff_mm"] / img_cam.pitch_mm, noise_variance, gain_drift, glow,
+                                         torch.Generator().manual_seed(seed * 1009 + v))
+        m = measure_view(distorted, reference, flow, (cam.height, cam.width), image_binning, name=cam.name)
 
         u_true_t = resample(u_ren, cam.height, cam.width)
-        u_est_t = resample(u_est, cam.height, cam.width)
+        u_est_t = m.displacement / np.float32(image_binning)  # the figures' unit: px of the images' grid
         sl = slice(int(view_start[v]), int(view_start[v + 1]))
         pix = pixel[sl].cpu().numpy()
-        u_obs = torch.as_tensor(u_est_t.reshape(-1, 2)[pix], dtype=torch.float64)
-        eps_obs[sl] = displacement_to_deflection(u_obs, dirs[sl].cpu().double(), img_cam).float()
+        u_obs = torch.as_tensor(m.displacement.reshape(-1, 2)[pix], dtype=torch.float64)
+        eps_obs[sl] = displacement_to_deflection(u_obs, dirs[sl].cpu().double(), cam.unbinned(rig_binning)).float()
         err = (u_est_t.reshape(-1, 2)[pix] - u_true_t.reshape(-1, 2)[pix]) ** 2
         err = err[np.isfinite(err).all(-1)]
         sq_err, count = sq_err + float(err.sum()), count + len(err)
@@ -142,7 +175,7 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         rec["u_true"].append(u_true_t.astype(np.float32))
         rec["u_est"].append(u_est_t.astype(np.float32))
         rec["circle_of_confusion_px"].append(np.float64(coc["d_mm"] / img_cam.pitch_mm))
-        log.info("%s: displacement up to %.2f px, circle of confusion %.1f px", cam.name,
+        log.info("%s: true displacement up to %.2f px, circle of confusion %.1f px", cam.name,
                  float(np.abs(u_ren).max()), coc["d_mm"] / img_cam.pitch_mm)
     record = {k: np.stack(x) for k, x in rec.items()}
     record["displacement_rmse_px"] = np.float64(np.sqrt(sq_err / max(count, 1)))

@@ -19,7 +19,6 @@ from nerif.data import Scene
 from nerif.losses import deflection_terms
 from nerif.losses.images import bandpass, cell_origin, cell_weights, photometric_residual, photometric_scale
 from nerif.registry import Registry
-from nerif.sensing.displacement import displacement_matrix
 from nerif.solvers.batches import RayBatcher
 
 DATA_TERMS = Registry("data term", package="nerif.solvers")
@@ -112,7 +111,7 @@ class ImageTerm:
         self.scene, self.flow_iterations = scene, int(round(self.flow_warmup * iterations))
         self.flow.setup(scene, batches, iterations)
         device = scene.dirs.device
-        b, H = scene.cameras[0].binning // scene.images[0].camera.binning, scene.images[0].reference.shape[0]
+        b, H = scene.image_block(), scene.images[0].reference.shape[0]
         k = self.k
         patch = torch.full((len(scene.dirs), k * k), -1, dtype=torch.long, device=device)  # rays of each patch
         gain, scale, refs, dists = [], [], [], []
@@ -126,7 +125,7 @@ class ImageTerm:
                 dr, dc = divmod(j, k)
                 inside = (col + dc < cam.width) & (row + dr < cam.height)
                 patch[sl][inside, j] = lut[(pixel + dr * cam.width + dc)[inside]]
-            A = displacement_matrix(scene.dirs[sl].double(), im.camera) * scene.scale  # px per unit of sigma
+            A = scene.gain[sl] * (scene.scale / im.camera.binning)  # image px per unit of sigma
             ref = bandpass(im.reference, self.highpass_px, self.lowpass_px)
             gain.append(A.float())
             scale.append(torch.full((len(A),), photometric_scale(ref, A), device=device))
@@ -151,10 +150,8 @@ class ImageTerm:
         (at least 2, the same for every view) of image pixels apart on images of one size."""
         if scene.images is None:
             return "the background images, which these data do not have"
-        shapes = {(cam.binning // im.camera.binning, cam.binning % im.camera.binning, *im.reference.shape)
-                  for cam, im in zip(scene.cameras, scene.images)}
-        b, rest, _, _ = next(iter(shapes))
-        if len(shapes) > 1 or rest or b < 2:
+        b = scene.image_block()
+        if len({im.reference.shape for im in scene.images}) > 1 or b is None or b < 2:
             return ("every view's rays a whole number (at least 2) of image pixels apart, the same for all, on "
                     f"images of one size (rays binned {scene.cameras[0].binning}, images "
                     f"{scene.images[0].camera.binning}): raise the binning (data.binning or rig.binning)")

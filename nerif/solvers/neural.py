@@ -258,11 +258,6 @@ class NeuralSolver(IterativeSolver):
                 out[n].append(eps[n].detach())
         return {n: torch.cat(v) if v else d.new_zeros(0, 3) for n, v in out.items()}
 
-    def predicted_deflections(self, index: torch.Tensor, operators=("auto", "discrete")) -> dict:
-        """Deflections of sigma of scene rays ``index`` by each operator."""
-        batch = scene_rays(self.scene, index)
-        return self.render(batch.origins, batch.dirs, operators)
-
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
         """Deflections of sigma by the operator training fits (:attr:`fitted_operator`)."""
         op = self.fitted_operator

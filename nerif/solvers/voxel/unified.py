@@ -14,7 +14,6 @@ from __future__ import annotations
 import torch
 
 from nerif.losses.images import bandpass, block_pixels, photometric_scale
-from nerif.sensing.displacement import displacement_matrix
 from nerif.sensing.imaging import sample
 
 
@@ -40,17 +39,17 @@ def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: floa
                          "do not have: use data=capture or data.sensing=realistic")
     if linearize_at not in ("zero", "flow"):
         raise ValueError(f"linearize_at must be zero or flow, got '{linearize_at}'")
+    b = scene.image_block()
+    if b is None:
+        raise ValueError(f"solver=cgls data_term=images: rays binned {scene.cameras[0].binning} are not a whole number "
+                         f"of image pixels (images binned {scene.images[0].camera.binning}) in every view")
     Ms, cs = [], []
     for v, (cam, im) in enumerate(zip(scene.cameras, scene.images)):
-        b = cam.binning // im.camera.binning
-        if b * im.camera.binning != cam.binning:
-            raise ValueError(f"{cam.name}: rays binned {cam.binning} are not a whole number of image pixels "
-                             f"(images binned {im.camera.binning})")
         sl = scene.view_slice(v)
-        A = displacement_matrix(scene.dirs[sl].double(), im.camera) * scene.scale  # (n, 2, 3) px per sigma unit
+        A = scene.gain[sl] * (scene.scale / im.camera.binning)  # (n, 2, 3) image px per sigma unit
         ref, dist = (bandpass(i.double(), highpass_px, lowpass_px) for i in (im.reference, im.distorted))
         x = block_pixels(scene.pixel[sl], cam.width, b).double()  # (n, P, 2)
-        u0 = (A @ scene.observed[sl].double()[..., None])[..., 0] if linearize_at == "flow" else A.new_zeros(len(A), 2)
+        u0 = scene.displacement_px[sl].double() / im.camera.binning if linearize_at == "flow" else A.new_zeros(len(A), 2)
         p = (x + u0[:, None, :]).reshape(-1, 2)
         grads = [(sample(ref, p + step_px * p.new_tensor(e)) - sample(ref, p - step_px * p.new_tensor(e))) / (2 * step_px)
                  for e in ((1.0, 0.0), (0.0, 1.0))]

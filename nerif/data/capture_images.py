@@ -1,0 +1,92 @@
+"""The image files of a capture: which files a frame has (each present and listed in the rig file), their headers
+checked without decoding (a long series is checked before any flow runs), and greyscale images decoded once."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+from PIL import Image, UnidentifiedImageError
+
+from nerif.data.rig_file import RIG_FILE, RigFile
+
+IMAGE_SUFFIXES = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
+FULL_SCALE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
+# Pillow's modes of one-channel images, as the dtype cv2.IMREAD_UNCHANGED gives them
+_GREY_MODES = {"1": np.dtype(np.uint8), "L": np.dtype(np.uint8), "I;16": np.dtype(np.uint16), "I;16B": np.dtype(np.uint16),
+               "I;16L": np.dtype(np.uint16), "I;16N": np.dtype(np.uint16)}
+
+
+def capture_files(rig: RigFile, frame: int = 0) -> tuple[list[Path], list[Path]]:
+    """The distorted and reference image of every view of ``frame``; raises for a missing file or an image the
+    rig file does not list (in the folder or in a folder of its frames)."""
+    root, n = rig.root, rig.n_views
+    distorted = [root / f for f in rig.frames[frame].images]
+    references = [root / f for f in rig.references]
+    where = f"frame {frame} " if len(rig.frames) > 1 else ""
+    for k, p in enumerate(distorted + references):
+        if not p.is_file():
+            kind = f"{where}view {k} image" if k < n else f"view {k - n} reference"
+            raise FileNotFoundError(f"{rig.path} lists {kind} '{p.relative_to(root)}', which does not exist "
+                                    f"in {root}: add the file or remove the {'frame' if where and k < n else 'view'}")
+    top = root.resolve()
+    listed = {(root / f).resolve() for fr in rig.frames for f in fr.images} | {p.resolve() for p in references}
+    folders = {p.parent for p in listed if top in p.parents} | {top}  # the capture's own folders, not a shared one
+    extra = sorted(str(p.relative_to(top)) for d in folders for p in d.iterdir()
+                   if p.suffix.lower() in IMAGE_SUFFIXES and p.resolve() not in listed)
+    if extra:
+        raise ValueError(f"{root} holds image(s) {', '.join(extra)} that {RIG_FILE} does not list: add each to "
+                         "views (with its angle) or to its frame, or move it out of the folder")
+    return distorted, references
+
+
+def _colour(path: Path, channels: int) -> ValueError:
+    return ValueError(f"{path} is a colour image ({channels} channels); BOS needs greyscale: convert it "
+                      "(or save the camera's raw greyscale frame)")
+
+
+def _checked(path: Path, shape: tuple[int, int], dtype: np.dtype, sensor_px, depth: dict) -> None:
+    """One sentence where an image of ``shape`` (height, width) and ``dtype`` does not fit the capture (the
+    sensor's size, 8 or 16 bit, the bit depth of the first image, kept in ``depth``)."""
+    w, h = (int(x) for x in sensor_px)
+    if dtype not in FULL_SCALE:
+        raise ValueError(f"{path} is {dtype}; nerif reads 8-bit or 16-bit greyscale images")
+    if shape != (h, w):
+        raise ValueError(f"{path} is {shape[1]} x {shape[0]} px but the rig's sensor_px (a calibration's "
+                         f"image_size) is {w} x {h}: every image must be a full frame of the same camera")
+    first = depth.setdefault("first", (dtype, path))
+    if dtype != first[0]:
+        raise ValueError(f"{path} is {dtype} but {first[1].name} is {first[0]}: save every image with the same "
+                         "bit depth (8 or 16 bit)")
+
+
+def check_images(paths: list[Path], sensor_px) -> None:
+    """Every image of ``paths`` readable, greyscale, 8 or 16 bit, of the sensor's size and of one bit depth, from
+    its header alone (nothing is decoded: a long series is checked in a moment)."""
+    depth: dict = {}
+    for p in paths:
+        try:
+            with Image.open(p) as img:
+                mode, (w, h), bands = img.mode, img.size, len(img.getbands())
+        except (UnidentifiedImageError, OSError):
+            raise ValueError(f"{p} is not a readable image") from None
+        if bands > 1 or mode in ("P", "PA"):  # a palette is colour, whatever its one band says
+            raise _colour(p, max(bands, 3))
+        _checked(p, (h, w), _GREY_MODES.get(mode, np.dtype(np.float32) if mode == "F" else np.dtype(np.int32)),
+                 sensor_px, depth)
+
+
+def read_images(paths: list[Path], sensor_px) -> list[np.ndarray]:
+    """Each image decoded once, as (height, width) floats in [0, 1] of its full scale; checked as
+    :func:`check_images` checks them (a file that fails to decode says so)."""
+    out, depth = [], {}
+    for p in paths:
+        img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise ValueError(f"{p} is not a readable image")
+        if img.ndim == 3 and img.shape[2] > 1:
+            raise _colour(p, img.shape[2])
+        img = img.reshape(img.shape[:2])
+        _checked(p, img.shape, img.dtype, sensor_px, depth)
+        out.append(img.astype(np.float32) / FULL_SCALE[img.dtype])
+    return out

@@ -1,0 +1,245 @@
+"""A capture's rig file, ``rig.yaml``, read once and checked into a typed :class:`RigFile` (format versions 1-3:
+one camera model on an arc, a time series, OpenCV-calibrated cameras; every key is explained in
+``docs/captures.md``)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import yaml
+
+from nerif.data.calibration import calibrated_camera, calibration_entry, read_calibration
+from nerif.geometry import Camera, ProbeBox, arc_rig
+from nerif.physics import Ambient
+
+RIG_FILE = "rig.yaml"
+RIG_VERSION = 2  # what the writer of a steady or time-resolved arc capture writes
+READ_VERSIONS = (1, 2, 3)
+FORMAT_DOC = "docs/captures.md"
+ARC_KEYS = ("focal_mm", "pitch_um", "f_number", "camera_to_centre_mm", "camera_to_background_mm")
+
+
+@dataclass(frozen=True)
+class RigFrame:
+    """One instant of a capture: ``time_s`` [s] and one distorted image file per view (relative to the folder)."""
+
+    time_s: float
+    images: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ArcLens:
+    """The one camera model of a version-1/2 rig file, repeated at every angle of an arc: lengths [mm], pitch
+    [um]."""
+
+    focal_mm: float
+    pitch_um: float
+    f_number: float
+    camera_to_centre_mm: float
+    camera_to_background_mm: float
+
+
+@dataclass(frozen=True)
+class RigFile:
+    """What ``rig.yaml`` says of a capture.
+
+    Attributes:
+        path: the rig file. version: its format version.
+        sensor_px: (width, height) of every image [px]. angles_deg: (V,) the views' azimuths [deg].
+        references: (V,) each view's reference image file. frames: the instants, each with V distorted images.
+        roi_px: (x, y, width, height) the region of interest on the sensor [px].
+        box: the probe box. ambient: T0, n0 and T_max of the gas around the flame.
+        heldout: the views never trained on (None: the default, the last view).
+        temperature_range_K: (low, high) the temperatures the flame lies within, or None.
+        lens: the camera model of an arc (versions 1, 2), else None.
+        calibrated: the calibrated cameras (version 3, full sensor), else None.
+        sources: the files it was read from: the rig file and its calibration file, if any.
+    """
+
+    path: Path
+    version: int
+    sensor_px: tuple[int, int]
+    angles_deg: tuple[float, ...]
+    references: tuple[str, ...]
+    frames: tuple[RigFrame, ...]
+    roi_px: tuple[int, int, int, int]
+    box: ProbeBox
+    ambient: Ambient
+    heldout: Optional[tuple[int, ...]]
+    temperature_range_K: Optional[tuple[float, float]]
+    lens: Optional[ArcLens] = None
+    calibrated: Optional[tuple[Camera, ...]] = None
+    sources: tuple[Path, ...] = ()
+
+    @property
+    def root(self) -> Path:
+        return self.path.parent
+
+    @property
+    def n_views(self) -> int:
+        return len(self.angles_deg)
+
+    def cameras(self) -> list[Camera]:
+        """The cameras on the full sensor."""
+        if self.calibrated is not None:
+            return list(self.calibrated)
+        w, h = self.sensor_px
+        lens = self.lens
+        return arc_rig(angles_deg=list(self.angles_deg), distance_mm=lens.camera_to_centre_mm, focal_mm=lens.focal_mm,
+                       width_px=w, height_px=h, pitch_um=lens.pitch_um,
+                       background_behind_mm=lens.camera_to_background_mm - lens.camera_to_centre_mm,
+                       f_number=lens.f_number, binning=1)
+
+
+def _need(d, key: str, where: str):
+    if not isinstance(d, dict) or key not in d or d[key] is None:
+        raise ValueError(f"{where} lacks '{key}': see the rig file format in {FORMAT_DOC}")
+    return d[key]
+
+
+def _optional(rig: dict, key: str, default):
+    """An optional key: its value, or ``default`` where it is absent or null."""
+    value = rig.get(key)
+    return default if value is None else value
+
+
+def _positive(v, what: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (np.isfinite(v) and v > 0):
+        raise ValueError(f"{what} = {v!r} must be a positive number")
+    return float(v)
+
+
+def read_rig(root: Path) -> RigFile:
+    """``rig.yaml`` of the capture folder ``root``, checked: format, version, required keys, view and frame lists;
+    one sentence naming the file and the key otherwise."""
+    path = Path(root) / RIG_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} does not exist: a capture folder needs a {RIG_FILE} beside its images")
+    try:
+        rig = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        where = getattr(e, "problem_mark", None)
+        raise ValueError(f"{path} is not valid YAML{f' (line {where.line + 1})' if where else ''}: "
+                         f"{getattr(e, 'problem', None) or str(e).splitlines()[0]}") from None
+    if not isinstance(rig, dict) or rig.get("format") != "nerif-capture":
+        raise ValueError(f"{path} is not a nerif capture rig file (it needs 'format: nerif-capture')")
+    if rig.get("version") not in READ_VERSIONS:
+        raise ValueError(f"{path} has version {rig.get('version')}; this nerif reads versions "
+                         f"{', '.join(str(v) for v in READ_VERSIONS[:-1])} and {READ_VERSIONS[-1]}")
+    lens, calibrated = None, None
+    if rig["version"] == 3:
+        calibrated = _calibrated_cameras(path, rig)
+        w, h = calibrated[0].camera.width, calibrated[0].camera.height
+        angles = [round(float(np.degrees(np.arctan2(c.position[0], c.position[2]))), 6) for c in calibrated]
+        views = {"angles_deg": angles, "images": [c.image for c in calibrated],
+                 "references": [c.reference for c in calibrated]}
+        calibrated = tuple(c.camera for c in calibrated)
+        roi = _optional(rig, "roi_px", [0, 0, w, h])
+    else:
+        lens, (w, h) = _arc_lens(path, rig)
+        views = _need(rig, "views", str(path))
+        angles = _need(views, "angles_deg", f"{path} views")
+        roi = _need(rig, "roi_px", str(path))
+    refs = _need(views, "references", f"{path} views")
+    frames = _frames(rig, views, len(angles), path)
+    if isinstance(refs, list) and len(refs) != len(angles):
+        raise ValueError(f"{path}: views.references lists {len(refs)} files for {len(angles)} views; give one "
+                         "per view or a single shared file")
+    refs = refs if isinstance(refs, list) else [refs] * len(angles)
+    probe, amb = _need(rig, "probe", str(path)), _need(rig, "ambient", str(path))
+    box = ProbeBox(tuple(int(n) for n in _need(probe, "shape", f"{path} probe")),
+                   float(_need(probe, "voxel_mm", f"{path} probe")))
+    ambient = Ambient(float(_need(amb, "T0", f"{path} ambient")), float(_need(amb, "n0", f"{path} ambient")),
+                      float(_optional(rig, "T_max", 2000.0)))
+    held = rig.get("heldout")
+    t_range = rig.get("temperature_range_K")
+    if t_range is not None:
+        lo, hi = (float(t) for t in t_range)
+        if not 0 < lo < hi:
+            raise ValueError(f"{path}: temperature_range_K {t_range} must be two increasing positive temperatures [K]")
+    return RigFile(path, int(rig["version"]), (int(w), int(h)), tuple(float(a) for a in angles),
+                   tuple(str(r) for r in refs), frames, tuple(int(v) for v in roi), box, ambient,
+                   tuple(int(v) for v in held) if held is not None else None,
+                   (lo, hi) if t_range is not None else None, lens, calibrated,
+                   (path,) + ((path.parent / str(rig["calibration"]),) if "calibration" in rig else ()))
+
+
+def _arc_lens(path: Path, rig: dict) -> tuple[ArcLens, tuple[int, int]]:
+    """The camera model and the sensor size (width, height) of a version-1/2 rig file, checked."""
+    cam = _need(rig, "camera", str(path))
+    for k in ARC_KEYS + ("sensor_px",):
+        _need(cam, k, f"{path} camera")
+    values = {k: _positive(cam[k], f"{path}: camera.{k}") for k in ARC_KEYS}
+    if values["pitch_um"] < 0.5:  # no camera has pixels under half a micrometre: a pitch in millimetres
+        raise ValueError(f"{path}: camera.pitch_um = {cam['pitch_um']} is in micrometres (a pitch of "
+                         f"{cam['pitch_um']} mm is {cam['pitch_um'] * 1e3:g})")
+    if not values["camera_to_background_mm"] > values["camera_to_centre_mm"]:
+        raise ValueError(f"{path}: camera.camera_to_background_mm = {cam['camera_to_background_mm']} must exceed "
+                         f"camera.camera_to_centre_mm = {cam['camera_to_centre_mm']} (the background lies behind the "
+                         "probe)")
+    w, h = (int(x) for x in cam["sensor_px"])
+    return ArcLens(**values), (w, h)
+
+
+@dataclass(frozen=True)
+class _Calibrated:
+    camera: Camera
+    image: str
+    reference: str
+
+    @property
+    def position(self):
+        return self.camera.position
+
+
+def _calibrated_cameras(path: Path, rig: dict) -> list[_Calibrated]:
+    """The cameras of a version-3 rig file, from the calibration file it names or its own ``cameras`` list."""
+    if ("calibration" in rig) == ("cameras" in rig):
+        raise ValueError(f"{path}: version 3 needs either 'calibration' (an OpenCV calibration file) or a 'cameras' "
+                         f"list, {'not both' if 'cameras' in rig else 'one of them'}")
+    if "cameras" in rig:
+        if not isinstance(rig["cameras"], list) or not rig["cameras"]:
+            raise ValueError(f"{path}: 'cameras' must be a list with one entry per camera")
+        cal = [calibration_entry(c if isinstance(c, dict) else {}, f"camera {k:02d}", f"{path}: cameras[{k}]")
+               for k, c in enumerate(rig["cameras"])]
+    else:
+        cal = read_calibration(path.parent / str(rig["calibration"]))
+    sizes = {c["size"] for c in cal}
+    if len(sizes) > 1:
+        raise ValueError(f"{path}: the cameras' image sizes differ ({sorted(sizes)}); nerif needs one size for all")
+    if len({c["name"] for c in cal}) != len(cal):
+        raise ValueError(f"{path}: two cameras share a name")
+    f_number = float(_optional(rig, "f_number", 32.0))
+    return [_Calibrated(calibrated_camera(c, f_number), c["image"], c["reference"]) for c in cal]
+
+
+def _frames(rig: dict, views: dict, n: int, path: Path) -> tuple[RigFrame, ...]:
+    """The frames of a rig file with one image per view: its ``frames`` list (version 2), or its ``views.images``
+    as one frame at time 0; checked."""
+    if rig.get("version") == 1 and "frames" in rig:
+        raise ValueError(f"{path}: a frames list (a time series) needs 'version: 2'")
+    if ("frames" in rig) == ("images" in views):
+        raise ValueError(f"{path}: give the images either as views.images (one steady state) or as a frames list "
+                         f"(a time series, version 2), {'not both' if 'frames' in rig else 'one of them'}")
+    if "images" in views:
+        images = _need(views, "images", f"{path} views")
+        if len(images) != n:
+            raise ValueError(f"{path}: views.angles_deg has {n} angles but views.images lists {len(images)} "
+                             "images; give one angle per image")
+        return (RigFrame(0.0, tuple(str(f) for f in images)),)
+    frames = rig["frames"]
+    if not isinstance(frames, list) or not frames:
+        raise ValueError(f"{path}: frames must be a list of frames, each with its time_s and images")
+    for k, fr in enumerate(frames):
+        images = _need(fr, "images", f"{path} frame {k}")
+        _need(fr, "time_s", f"{path} frame {k}")
+        if not isinstance(images, list) or len(images) != n:
+            got = len(images) if isinstance(images, list) else "no list of"
+            raise ValueError(f"{path}: frame {k} lists {got} images for {n} views (views.angles_deg): every frame "
+                             "needs one image per view, in the order of the angles")
+        if k and not float(fr["time_s"]) > float(frames[k - 1]["time_s"]):
+            raise ValueError(f"{path}: frame {k} has time_s {fr['time_s']}, not after frame {k - 1}'s "
+                             f"{frames[k - 1]['time_s']}: list the frames in time order")
+    return tuple(RigFrame(float(fr["time_s"]), tuple(str(f) for f in fr["images"])) for fr in frames)
