@@ -110,6 +110,8 @@ class Evaluation:
             u_obs = self.heldout_displacements[index]
             m.update(heldout_displacement_rmse_px=deflection_rmse(u_pred, u_obs),
                      heldout_displacement_psnr_db=psnr_db(u_pred, u_obs, self.peaks["displacement"]))
+            if every:  # what no flame at all leaves
+                m["heldout_displacement_rmse_px_none"] = deflection_rmse(torch.zeros_like(u_obs), u_obs)
         if h.image_block() is not None:
             m["heldout_photometric_rmse"] = self.photometric_rmse(index, pred)
             if every:  # what the flow's displacements and none leave, for comparison

@@ -145,17 +145,33 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
 
 def check_sign(scene, prior) -> list[str]:
     """One sentence where the deflections show gas colder than ambient (:func:`nerif.data.scene.hot_evidence`
-    above 0.2): a flame is hotter, so the reference and distorted images look swapped. Refused unless ``field.prior``
-    was set (a field that may be colder than ambient: then a warning, returned for ``metrics.json``)."""
+    above 0.2). Where most views agree on it, a flame is hotter, so the reference and distorted images look
+    swapped (or the deflections' sign reversed); where the views disagree, the measurement of those views is what
+    fails (a flow thrown off by the flame's own light, a shaking camera, an occluder), and the sentence names them.
+    Refused unless ``field.prior`` was set (a field that may be colder than ambient: then a warning, returned for
+    ``metrics.json``)."""
     evidence = hot_evidence(scene)
     if evidence <= 0.2:
         return []
-    msg = (f"the deflections point the way gas colder than ambient bends light (hot evidence {evidence:+.2f}; a "
-           "flame gives -0.3 to -1): " + ("the reference and distorted images look swapped" if scene.images is not None
-                                          else "their sign looks reversed"))
+    per_view = hot_evidence(scene, per_view=True)
+    cold = [cam.name for cam, e in zip(scene.cameras, per_view) if e > 0.2]
+    hot = [cam.name for cam, e in zip(scene.cameras, per_view) if e < -0.2]
+    seen = f"the deflections point the way gas colder than ambient bends light (hot evidence {evidence:+.2f}; a " \
+           "flame gives -0.3 to -1)"
+    if len(hot) >= max(1, len(scene.cameras) // 3):
+        msg = (f"{seen}, but the views disagree: {', '.join(cold)} show cold gas, {', '.join(hot)} a hot flame; "
+               "the displacements of the first look wrong (the flow thrown off by the flame's own light, a "
+               "shaking camera, an object in front of the background?): look at their images and the log's "
+               "measurement lines")
+        fix = "leave those views out (data.heldout) or fix their images"
+    else:
+        swapped = scene.images is not None
+        msg = f"{seen} in {len(cold)} of {len(scene.cameras)} views: " + (
+            "the reference and distorted images look swapped" if swapped else "their sign looks reversed")
+        fix = "swap them" if swapped else "check the data"
     if prior is None:
-        raise ValueError(f"{msg}; {'swap them' if scene.images is not None else 'check the data'}, or for gas that is "
-                         "colder than ambient set field.prior=[a, b] with b above its coldest sigma")
+        raise ValueError(f"{msg}; {fix}, or for gas that is colder than ambient set field.prior=[a, b] with b above "
+                         "its coldest sigma")
     log.warning("%s", msg)
     return [msg]
 

@@ -23,11 +23,12 @@ from nerif.data.capture_images import capture_files, check_images, read_images
 from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest, resolve_binning
 from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.rig_file import RigFile, read_rig
-from nerif.data.scene import DATASETS, Scene, ViewImages, heldout_views, scene_from_displacements
+from nerif.data.scene import (DATASETS, Scene, ViewImages, found_per_view, heldout_views, outside_the_box,
+                              scene_from_displacements)
 from nerif.geometry import Camera, rays_in_box
 from nerif.physics import Ambient
 from nerif.sensing.flow import FLOW
-from nerif.sensing.measurement import measure_view
+from nerif.sensing.measurement import MEASUREMENT
 
 
 def rig_cameras(rig: RigFile, binning=1) -> tuple[list[Camera], list[Camera]]:
@@ -79,17 +80,16 @@ def _rig_digest(rig: RigFile) -> str:
     return h.hexdigest()
 
 
-_REFERENCES: dict = {}  # the last capture's reference images, keyed by their files' paths, sizes and times
+_REFERENCES: dict = {}  # the last capture's reference images (and flame-only ones), keyed by their files
 
 
-def reference_images(paths: list[Path], sensor_px) -> list[np.ndarray]:
-    """The reference images, decoded once for every frame of a series that shares them (:func:`read_images`;
-    decoded again when a file changes)."""
+def reference_images(paths: list[Path], sensor_px, kind: str = "reference") -> list[np.ndarray]:
+    """Images every frame of a series shares (the references, the flame-only exposures), decoded once
+    (:func:`read_images`; decoded again when a file changes)."""
     key = tuple((str(p.resolve()), p.stat().st_mtime_ns, p.stat().st_size) for p in paths)
-    if _REFERENCES.get("key") != key:
-        _REFERENCES.clear()
-        _REFERENCES.update(key=key, value=read_images(paths, sensor_px))
-    return _REFERENCES["value"]
+    if _REFERENCES.get(kind, {}).get("key") != key:
+        _REFERENCES[kind] = {"key": key, "value": read_images(paths, sensor_px)}
+    return _REFERENCES[kind]["value"]
 
 
 def sigma_prior(rig: RigFile, ambient: Ambient) -> Optional[tuple]:
@@ -120,12 +120,13 @@ def capture_frames(root: str, frames=None, **_) -> Optional[list[Frame]]:
 
 
 @DATASETS.register("capture")
-def capture(root: str, flow: dict, binning="auto", heldout: Optional[list] = None, frames=None,
-            frame: Optional[int] = None, truth: Optional[str] = None, device: str = "cpu") -> Scene:
+def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto", heldout: Optional[list] = None,
+            frames=None, frame: Optional[int] = None, truth: Optional[str] = None, device: str = "cpu") -> Scene:
     """A capture folder -> scene of the training views, with the held-out views as ``scene.heldout``.
 
     Args:
-        root: the capture folder. flow: a :data:`nerif.sensing.flow.FLOW` config.
+        root: the capture folder. flow: a :data:`nerif.sensing.flow.FLOW` config. measure: a
+            :data:`nerif.sensing.measurement.MEASUREMENT` config (None: the default stage).
         binning: b x b sensor pixels averaged into one ray (the ray grid); ``auto``: about one ray per voxel
             across at the probe (:func:`nerif.geometry.ray_binning`), logged.
         heldout: views never trained on (overrides the rig file's ``heldout``; default: the last view).
@@ -136,6 +137,8 @@ def capture(root: str, flow: dict, binning="auto", heldout: Optional[list] = Non
     """
     rig = read_rig(dataset_folder(root))
     FLOW.get(flow["name"])
+    measure = dict(measure or {"name": "default"})
+    MEASUREMENT.get(measure["name"])
     frame = 0 if frame is None else int(frame)
     if not 0 <= frame < len(rig.frames):
         raise ValueError(f"frame {frame}: {rig.path} lists {len(rig.frames)} frame(s)")
@@ -144,13 +147,17 @@ def capture(root: str, flow: dict, binning="auto", heldout: Optional[list] = Non
     held = heldout_views(heldout if heldout is not None else (rig.heldout if rig.heldout is not None else [len(cameras) - 1]), len(cameras))
     prior = sigma_prior(rig, rig.ambient)
     truth_T = read_truth(truth, rig.box) if truth is not None else None
-    check_images(distorted + references, rig.sensor_px)  # one bit depth for all, from the headers
+    flame = [rig.root / f for f in rig.flame_only or ()]
+    check_images(distorted + references + flame, rig.sensor_px)  # one bit depth for all, from the headers
     images, refs = read_images(distorted, rig.sensor_px), reference_images(references, rig.sensor_px)
-    measured = [measure_view(images[v], refs[v], flow, (cam.height, cam.width), region=roi, name=cam.name)
+    flames = reference_images(flame, rig.sensor_px, "flame") if flame else [None] * len(images)
+    quiet = outside_the_box(cameras, rays)
+    measured = [MEASUREMENT.build(measure, distorted=images[v], reference=refs[v], flow=flow, flame=flames[v],
+                                  grid_px=(cam.height, cam.width), region=roi, quiet=quiet[v], name=cam.name)
                 for v, cam in enumerate(cameras)]
-    views = [ViewImages(torch.as_tensor(r, device=device), torch.as_tensor(i, device=device), cam)
-             for r, i, cam in zip(refs, images, full)]
+    views = [ViewImages(torch.as_tensor(r, device=device), torch.as_tensor(m.distorted, device=device), cam)
+             for r, m, cam in zip(refs, measured, full)]
     scene = scene_from_displacements(rig.box, rig.ambient, cameras, [m.displacement for m in measured],
                                      [m.valid for m in measured], device=device, rays=rays, sigma_prior=prior,
-                                     images=views, truth_T=truth_T)
+                                     images=views, truth_T=truth_T, measured=found_per_view(measured))
     return scene.split_views(held)

@@ -23,14 +23,17 @@ def capture_files(rig: RigFile, frame: int = 0) -> tuple[list[Path], list[Path]]
     root, n = rig.root, rig.n_views
     distorted = [root / f for f in rig.frames[frame].images]
     references = [root / f for f in rig.references]
+    flame = [root / f for f in rig.flame_only or ()]
     where = f"frame {frame} " if len(rig.frames) > 1 else ""
-    for k, p in enumerate(distorted + references):
+    for k, p in enumerate(distorted + references + flame):
         if not p.is_file():
-            kind = f"{where}view {k} image" if k < n else f"view {k - n} reference"
+            kind = (f"{where}view {k} image" if k < n else f"view {k - n} reference" if k < 2 * n
+                    else f"view {k - 2 * n} flame_only image")
             raise FileNotFoundError(f"{rig.path} lists {kind} '{p.relative_to(root)}', which does not exist "
                                     f"in {root}: add the file or remove the {'frame' if where and k < n else 'view'}")
     top = root.resolve()
-    listed = {(root / f).resolve() for fr in rig.frames for f in fr.images} | {p.resolve() for p in references}
+    listed = ({(root / f).resolve() for fr in rig.frames for f in fr.images} | {p.resolve() for p in references}
+              | {p.resolve() for p in flame})
     folders = {p.parent for p in listed if top in p.parents} | {top}  # the capture's own folders, not a shared one
     extra = sorted(str(p.relative_to(top)) for d in folders for p in d.iterdir()
                    if p.suffix.lower() in IMAGE_SUFFIXES and p.resolve() not in listed)

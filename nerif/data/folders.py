@@ -67,7 +67,8 @@ def finite_or_masked(u: np.ndarray, what: str) -> np.ndarray:
     ok = np.isfinite(u).all(-1)
     bad = int(ok.size - ok.sum())
     if bad:
-        log.warning("%s: %d of %d displacement estimates are not finite; those rays are left out", what, bad, ok.size)
+        log.info("%s: %d of %d displacement estimates are left out (not measured: see the measurement lines)", what,
+                 bad, ok.size)
     return ok
 
 

@@ -56,6 +56,8 @@ class RigFile:
         lens: the camera model of an arc (versions 1, 2), else None.
         calibrated: the calibrated cameras (version 3, full sensor), else None.
         sources: the files it was read from: the rig file and its calibration file, if any.
+        flame_only: (V,) each view's exposure of the flame alone (the background switched off), where the rig
+            recorded one (the key ``flame_only``), else None: its light is taken off the distorted image.
     """
 
     path: Path
@@ -72,6 +74,7 @@ class RigFile:
     lens: Optional[ArcLens] = None
     calibrated: Optional[tuple[Camera, ...]] = None
     sources: tuple[Path, ...] = ()
+    flame_only: Optional[tuple[str, ...]] = None
 
     @property
     def root(self) -> Path:
@@ -154,6 +157,10 @@ def read_rig(root: Path) -> RigFile:
     ambient = Ambient(float(_need(amb, "T0", f"{path} ambient")), float(_need(amb, "n0", f"{path} ambient")),
                       float(_optional(rig, "T_max", 2000.0)))
     held = rig.get("heldout")
+    flame = rig.get("flame_only")
+    if flame is not None and (not isinstance(flame, list) or len(flame) != len(angles)):
+        raise ValueError(f"{path}: flame_only must list one image per view ({len(angles)}), each the view's exposure "
+                         "of the flame with the background switched off")
     t_range = rig.get("temperature_range_K")
     if t_range is not None:
         lo, hi = (float(t) for t in t_range)
@@ -163,7 +170,8 @@ def read_rig(root: Path) -> RigFile:
                    tuple(str(r) for r in refs), frames, tuple(int(v) for v in roi), box, ambient,
                    tuple(int(v) for v in held) if held is not None else None,
                    (lo, hi) if t_range is not None else None, lens, calibrated,
-                   (path,) + ((path.parent / str(rig["calibration"]),) if "calibration" in rig else ()))
+                   (path,) + ((path.parent / str(rig["calibration"]),) if "calibration" in rig else ()),
+                   tuple(str(f) for f in flame) if flame is not None else None)
 
 
 def _arc_lens(path: Path, rig: dict) -> tuple[ArcLens, tuple[int, int]]:

@@ -66,6 +66,8 @@ class Scene:
             have them (captures, realistic sensing), else None.
         displacements: (N, 2) the image displacements measured for each ray [px of the full sensor] where the data
             were measured as displacements (captures), else None (:attr:`displacement_px` derives them).
+        measured: what the measurement stage found, per view (:class:`nerif.sensing.measurement.ViewMeasurement`
+            ``found``: name -> list of one value per view), where the data were measured from images, else None.
         valid_images: per view, (height, width) bool on the ray grid: the pixels with a usable measurement, where
             the data lack some (a region of interest, a flow without an estimate), else None (every pixel). Any
             other pixel is unknown: it has no ray, carves no visual hull and counts as no ambient.
@@ -90,6 +92,7 @@ class Scene:
     images: Optional[list] = None
     displacements: Optional[torch.Tensor] = None
     valid_images: Optional[list] = None
+    measured: Optional[dict] = None
     observed: torch.Tensor = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -166,6 +169,7 @@ class Scene:
         return replace(self, cameras=[self.cameras[v] for v in vs], origins=self.origins[vs], dirs=self.dirs[idx],
                        eps=self.eps[idx], pixel=self.pixel[idx], view_start=starts, mask_images=pick(self.mask_images),
                        heldout=None, sensing=None, images=pick(self.images), valid_images=pick(self.valid_images),
+                       measured={k: pick(v) for k, v in self.measured.items()} if self.measured else None,
                        displacements=self.displacements[idx] if self.displacements is not None else None)
 
     def split_views(self, heldout) -> "Scene":
@@ -260,15 +264,15 @@ def scene_from_displacements(box: ProbeBox, ambient: Ambient, cameras: list[Came
                  displacements=u.float(), valid_images=[np.asarray(ok, dtype=bool) for ok in valid], **fields)
 
 
-def hot_evidence(scene: Scene) -> float:
+def hot_evidence(scene: Scene, per_view: bool = False):
     """How clearly the observed deflections show gas hotter (less refractive) than ambient, within [-1, 1]:
     -1 for a hot flame seen by every view, +1 for the reverse (reference and distorted images swapped, or the
     deflections' sign reversed). Per view and image row, the deflection along the row, ``g = dP/dc`` with ``P``
     the line integral of sigma along the rays, has the first moment ``sum_c (c - c_mean) g_c = -sum_c P_c`` (up to
     the rows' ends): negative where ``P`` is, as through a flame. Returns the moments summed over rows and views,
-    over the sum of their magnitudes. Measured: -0.75 to -1.0 on the synthetic flames, -0.81 on the independent
-    capture through the optical flow, -0.35 on the paper's Phantom 1."""
-    num = den = 0.0
+    over the sum of their magnitudes (``per_view``: a list, each view's own). Measured: -0.75 to -1.0 on the
+    synthetic flames, -0.81 on the independent capture through the optical flow, -0.35 on the paper's Phantom 1."""
+    sums = []
     for v in range(scene.n_views):
         sl = scene.view_slice(v)
         e = scene.view_image(v, scene.observed[sl].double().cpu().numpy(), np.nan)
@@ -281,8 +285,10 @@ def hot_evidence(scene: Scene) -> float:
         c = np.arange(g.shape[1], dtype=np.float64)[None, :]
         c_mean = (c * ok).sum(1, keepdims=True) / np.maximum(ok.sum(1, keepdims=True), 1)
         moment = (c - c_mean) * g
-        num -= moment.sum()  # -sum_c P_c
-        den += np.abs(moment).sum()
+        sums.append((-moment.sum(), np.abs(moment).sum()))  # -sum_c P_c, and the scale
+    if per_view:
+        return [float(n / d) if d > 0 else 0.0 for n, d in sums]
+    num, den = sum(n for n, _ in sums), sum(d for _, d in sums)
     return float(num / den) if den > 0 else 0.0
 
 
@@ -312,6 +318,23 @@ def heldout_views(heldout, n_views: int) -> list[int]:
     if len(held) >= n_views:
         raise ValueError(f"all {n_views} views are held out: at least one must be trained on")
     return held
+
+
+def outside_the_box(cameras: list[Camera], rays: tuple) -> list[np.ndarray]:
+    """Per view, (height, width) bool: the pixels whose ray misses the probe box (no flame deflects them), from
+    ``rays`` (:func:`nerif.geometry.rays_in_box`: origins, dirs, pixel, view_start)."""
+    pixel, starts = rays[2].cpu().numpy(), rays[3].cpu().numpy()
+    out = []
+    for v, cam in enumerate(cameras):
+        free = np.ones(cam.height * cam.width, bool)
+        free[pixel[starts[v]:starts[v + 1]]] = False
+        out.append(free.reshape(cam.height, cam.width))
+    return out
+
+
+def found_per_view(measurements: list) -> dict:
+    """What each view's measurement found (their ``found``), as name -> list of one value per view."""
+    return {k: [m.found[k] for m in measurements] for k in measurements[0].found} if measurements else {}
 
 
 def kept_pixels(cameras: list[Camera], pixel: torch.Tensor, view_start: torch.Tensor, keep: torch.Tensor) -> list:

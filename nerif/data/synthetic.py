@@ -105,8 +105,9 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
         images = [ViewImages(torch.as_tensor(record["reference"][v] / 255.0, dtype=torch.float32, device=device),
                              torch.as_tensor(record["distorted"][v] / 255.0, dtype=torch.float32, device=device),
                              cam.unbinned(cam.binning).binned(binning)) for v, cam in enumerate(cameras)]
+    found = {k[len("found/"):]: v.tolist() for k, v in (record or {}).items() if k.startswith("found/")} or None
     return Scene(ph.box, ambient, cameras, origins, dirs, eps.to(device), pixel, view_start, ph.T, record,
-                 perpendicular_only=measured_only, images=images, valid_images=valid)
+                 perpendicular_only=measured_only, images=images, valid_images=valid, measured=found)
 
 
 def with_noise(eps: torch.Tensor, dirs: Optional[torch.Tensor], fraction: float, seed: int) -> torch.Tensor:

@@ -6,6 +6,7 @@ its scene; they compute no score of their own: :class:`nerif.evaluation.Evaluati
 """
 from __future__ import annotations
 
+import logging
 import re
 from pathlib import Path
 
@@ -13,6 +14,8 @@ import numpy as np
 
 from nerif.io.export import write_npz, write_png, write_vti
 from nerif.io.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
+
+log = logging.getLogger(__name__)
 
 
 def write_masks(masks, scene, out_dir: Path) -> None:
@@ -66,6 +69,18 @@ def write_heldout(solver, out_dir: Path) -> dict:
     return ev.heldout_errors(solver.predict, every=True, pred=pred)
 
 
+def failed_fit(m: dict) -> str:
+    """One sentence where the held-out views say the fit failed: its prediction explains their images, or their
+    displacements, worse than no flame at all would (``heldout_*`` against ``heldout_*_none``); else ""."""
+    for key, what in (("heldout_photometric_rmse", "images"), ("heldout_displacement_rmse_px", "displacements")):
+        fit, none = m.get(key), m.get(f"{key}_none")
+        if fit is not None and none is not None and fit > none:
+            return (f"the fit failed: it explains the held-out view's {what} worse than no flame at all ({key} "
+                    f"{fit:.4g} against {none:.4g}); its temperatures mean nothing. Look at the measurement lines "
+                    "of the log (shakes, pixels left out) and at heldout/*.png")
+    return ""
+
+
 def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     """Volumes (.npz, .vti), slice and curve PNGs, held-out figures, and the metrics of the final state."""
     amb, box = scene.ambient, scene.box
@@ -87,6 +102,9 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     final.pop("iteration", None)
     if scene.heldout is not None:
         final.update(write_heldout(solver, out_dir))  # every held-out ray, not the evaluation subset
+        failed = failed_fit(final)
+        if failed:
+            log.warning("%s", failed)
     if not amb.temperature_known:
         final["deflection_unit"] = "sigma (the data are deflections of sigma; no temperature is inferred)"
     final.update(solver.timing())
@@ -101,10 +119,28 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
         coc = np.atleast_1d(scene.sensing["circle_of_confusion_px"])  # per view
         final["circle_of_confusion_px"] = float(coc.max())  # the widest blur of any view
         final["circle_of_confusion_px_per_view"] = [float(c) for c in coc]
+        if "shake_true_px" in scene.sensing:  # the vibration the chain put in, to score what was found
+            final["shake_true_px"] = [[float(x) for x in s] for s in scene.sensing["shake_true_px"]]
+    final.update(measurement_report(scene))
     if amb.temperature_known:
         final["temperature_note"] = ("temperature from n assuming an air-dominated gas of fixed composition "
                                      "(n - 1 = T0 (n0 - 1) / T)")
     return final
+
+
+def measurement_report(scene) -> dict:
+    """What the measurement stage found in every view, training and held out (``measurement``: camera name ->
+    its figures), and the largest shake taken off any view (``shake_px_max``, px of the full sensor); empty for
+    data not measured from images."""
+    per_view = {}
+    for s in (scene, scene.heldout):
+        if s is not None and s.measured:
+            for v, cam in enumerate(s.cameras):
+                per_view[cam.name] = {k: vals[v] for k, vals in s.measured.items()}
+    if not per_view:
+        return {}
+    shakes = [float(np.hypot(*f["shake_px"])) for f in per_view.values() if "shake_px" in f]
+    return {"measurement": per_view, **({"shake_px_max": max(shakes)} if shakes else {})}
 
 
 def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:

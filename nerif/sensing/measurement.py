@@ -2,7 +2,11 @@
 ray grid, their validity per pixel and what was found out. A capture (:mod:`nerif.data.capture`) and the
 realistic chain (:mod:`nerif.sensing.realistic`) both measure through it, so that every synthetic benchmark runs
 each step a real capture goes through. It is the one place the optical flow (:data:`nerif.sensing.flow.FLOW`)
-runs; every step a view's images need before reconstruction belongs here.
+runs; every step a view's images need before reconstruction belongs here, one module a step:
+:mod:`~nerif.sensing.saturation` and :mod:`~nerif.sensing.occlusion` (pixels with no readable background),
+the flow, :mod:`~nerif.sensing.shake` (the camera's rigid motion between the exposures, taken off) and
+:mod:`~nerif.sensing.vectors` (outliers). Stages are registered in :data:`MEASUREMENT` (config group
+``measure``).
 """
 from __future__ import annotations
 
@@ -12,10 +16,17 @@ from typing import Optional
 
 import numpy as np
 
+from nerif.registry import Registry
+from nerif.sensing.flame_light import without_flame_light
 from nerif.sensing.flow import FLOW
 from nerif.sensing.imaging import resample
+from nerif.sensing.occlusion import occluded
+from nerif.sensing.saturation import saturated
+from nerif.sensing.shake import rigid_shift
+from nerif.sensing.vectors import median_test
 
 log = logging.getLogger(__name__)
+MEASUREMENT = Registry("measurement stage", package="nerif.sensing")
 
 
 @dataclass
@@ -24,43 +35,85 @@ class ViewMeasurement:
 
     Attributes:
         displacement: (h, w, 2) float32 image displacements [px of the full sensor] (column, row) on the ray grid,
-            each a block mean of the flow's; NaN where ``valid`` is False.
+            each a block mean of the flow's, the camera's rigid shift taken off; NaN where ``valid`` is False.
         valid: (h, w) bool: pixels with a usable measurement. Any other pixel is unknown: it carves no visual hull,
             counts as no ambient and enters no loss and no score.
-        found: what was found (numbers, for ``metrics.json`` and the log): ``displacement_max_px``,
-            ``valid_fraction``.
-        flow: (H, W, 2) the flow itself on the images' grid [px of that grid], kept where asked for figures, else
-            None.
+        found: what was found (for ``metrics.json`` and the log): ``displacement_max_px``, ``valid_fraction``,
+            ``shake_px`` (column, row) [px of the full sensor], and the shares of the ray grid's pixels left out
+            as ``saturated``, ``occluded`` (no texture in the reference), ``unmeasured`` (no estimate from the
+            flow) and ``rejected`` (outlier vectors).
+        distorted: (H, W) the distorted image the flow compared (the flame's light taken off where it was
+            recorded), what an image term fits.
+        flow: (H, W, 2) the flow itself on the images' grid [px of that grid], kept where asked for, else None.
     """
 
     displacement: np.ndarray
     valid: np.ndarray
     found: dict = field(default_factory=dict)
+    distorted: Optional[np.ndarray] = None
     flow: Optional[np.ndarray] = None
 
 
+def _on_grid(mask: np.ndarray, h: int, w: int) -> np.ndarray:
+    """An image-grid mask -> the ray grid: a block is set where any of its pixels is."""
+    return resample(mask.astype(np.float32), h, w) > 0
+
+
+@MEASUREMENT.register("default")
 def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_px: tuple[int, int],
-                 image_binning: int = 1, region: Optional[np.ndarray] = None, name: str = "",
-                 keep_flow: bool = False) -> ViewMeasurement:
+                 image_binning: int = 1, region: Optional[np.ndarray] = None, quiet: Optional[np.ndarray] = None,
+                 flame: Optional[np.ndarray] = None, name: str = "", keep_flow: bool = False, saturation: bool = True, occlusion_fraction: float = 0.25,
+                 shake: bool = True, median_threshold: Optional[float] = 2.0, median_eps_px: float = 0.1
+                 ) -> ViewMeasurement:
     """Measure one view.
 
     Args:
-        distorted, reference: (H, W) float images in [0, 1] on the images' grid, ``image_binning`` sensor pixels
-            a pixel across (1: the full sensor).
+        distorted, reference: (H, W) float images in [0, 1] of full scale on the images' grid, ``image_binning``
+            sensor pixels a pixel across (1: the full sensor).
         flow: a :data:`FLOW` config. grid_px: (height, width) of the ray grid (a whole number of image pixels a
             ray, or the images' grid resampled).
         region: (height, width) bool on the ray grid: the pixels to measure (a region of interest), None: all.
+        quiet: (height, width) bool on the ray grid: pixels that see no flame (outside the probe box's image),
+            where the camera's shake is read; None: the bulk of the view.
+        flame: (H, W) the view's exposure with the background off (the flame's own light), taken off ``distorted``
+            (:func:`~nerif.sensing.flame_light.without_flame_light`) after the saturated pixels are found; None.
         name: the view, for the log. keep_flow: keep the image-grid flow in the result.
+        saturation: leave out pixels at the top of the range in either exposure (:mod:`~nerif.sensing.saturation`).
+        occlusion_fraction: leave out pixels whose reference texture has less than this share of the view's median
+            contrast (a burner, a mount; :mod:`~nerif.sensing.occlusion`); 0: keep all.
+        shake: estimate the view's rigid shift between the exposures and take it off (:mod:`~nerif.sensing.shake`).
+        median_threshold, median_eps_px: the normalised median test's threshold and noise floor [px of the full
+            sensor] (:mod:`~nerif.sensing.vectors`); threshold None: no test.
     """
-    u_image = FLOW.build(flow, distorted=distorted, reference=reference)
     h, w = grid_px
+    valid = np.ones((h, w), bool) if region is None else np.asarray(region, dtype=bool).copy()
+    found = {}
+    for what, hidden in (("saturated", saturated(distorted, reference) if saturation else None),
+                         ("occluded", occluded(reference, fraction=occlusion_fraction) if occlusion_fraction else None)):
+        lost = _on_grid(hidden, h, w) & valid if hidden is not None else np.zeros((h, w), bool)
+        found[what] = float(lost.mean())
+        valid &= ~lost
+    if flame is not None:
+        distorted = without_flame_light(distorted, flame)
+    u_image = FLOW.build(flow, distorted=distorted, reference=reference)
     u = resample(u_image, h, w).astype(np.float32) * np.float32(image_binning)  # px of the full sensor
-    valid = np.isfinite(u).all(-1)
-    if region is not None:
-        valid &= np.asarray(region, dtype=bool)
+    unmeasured = valid & ~np.isfinite(u).all(-1)
+    found["unmeasured"] = float(unmeasured.mean())
+    valid &= ~unmeasured
+    s = np.zeros(2)
+    if shake:
+        s, where = rigid_shift(u, valid, quiet)
+        u -= s.astype(np.float32)
+        log.debug("%s: shake read %s", name, where)
+    found["shake_px"] = [float(s[0]), float(s[1])]
+    rejected = median_test(u, valid, median_threshold, median_eps_px) if median_threshold else np.zeros((h, w), bool)
+    found["rejected"] = float(rejected.mean())
+    valid &= ~rejected
     u[~valid] = np.nan
     peak = float(np.linalg.norm(u[valid], axis=-1).max()) if valid.any() else 0.0
-    found = {"displacement_max_px": peak, "valid_fraction": float(valid.mean())}
-    log.info("%s: displacement up to %.2f px%s", name or "view", peak,
-             "" if valid.all() else f", {100 * (1 - found['valid_fraction']):.1f} % of the pixels unmeasured")
-    return ViewMeasurement(u, valid, found, u_image if keep_flow else None)
+    found.update(displacement_max_px=peak, valid_fraction=float(valid.mean()))
+    left = ", ".join(f"{100 * found[k]:.1f} % {k}" for k in ("saturated", "occluded", "unmeasured", "rejected")
+                     if found[k] > 0)
+    log.info("%s: displacement up to %.2f px; shake (%+.3f, %+.3f) px taken off%s", name or "view", peak, s[0], s[1],
+             f"; left out: {left}" if left else "")
+    return ViewMeasurement(u, valid, found, distorted, u_image if keep_flow else None)

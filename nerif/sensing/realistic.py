@@ -26,7 +26,7 @@ from nerif.geometry import Camera, ProbeBox
 from nerif.renderers.voxel import line_integral, voxel_deflection
 from nerif.sensing.displacement import deflection_to_displacement, displacement_to_deflection
 from nerif.sensing.flow import FLOW
-from nerif.sensing.measurement import measure_view
+from nerif.sensing.measurement import MEASUREMENT
 from nerif.sensing.imaging import add_noise, diffraction_blur, resample, to_uint8, warp
 from nerif.sensing.models import SENSING
 from nerif.sensing.optics import aperture_points, aperture_rays, circle_of_confusion
@@ -72,19 +72,22 @@ def true_displacements(delta: torch.Tensor, box: ProbeBox, render_camera: Camera
 
 
 def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_variance: float, gain_drift: float,
-              glow: Optional[np.ndarray], generator: torch.Generator) -> tuple[np.ndarray, np.ndarray]:
+              glow: Optional[np.ndarray], generator: torch.Generator, gain_ramp: float = 0.0
+              ) -> tuple[np.ndarray, np.ndarray]:
     """The reference and the distorted exposure of one view.
 
     Args:
         background: (H, W) the pattern, intensities in [0, 1]. u: (H, W, 2) displacements [px of these images].
         blur_px: the diffraction spot's diameter [px]. noise_variance: of the additive Gaussian noise on each.
-        gain_drift: the distorted exposure's brightness over the reference's, less 1.
+        gain_drift: the distorted exposure's brightness over the reference's, less 1; ``gain_ramp``: that gain
+            grows by this much more from the left edge to the right (an uneven illumination drift).
         glow: (H, W) the flame's own light on the distorted exposure, as a fraction of the background's mean
             brightness, or None.
     Returns: (H, W) reference and distorted images (floats, noise drawn from ``generator``: reference first).
     """
     reference = add_noise(diffraction_blur(background, blur_px), noise_variance, generator).numpy()
-    distorted = diffraction_blur(warp(background, u), blur_px) * (1.0 + gain_drift)
+    gain = (1.0 + gain_drift) * (1.0 + gain_ramp * torch.linspace(0.0, 1.0, background.shape[1]))[None, :]
+    distorted = diffraction_blur(warp(background, u), blur_px) * gain
     if glow is not None:
         distorted = distorted + float(background.mean()) * torch.as_tensor(glow)
     return reference, add_noise(distorted, noise_variance, generator).numpy()
@@ -92,14 +95,14 @@ def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_v
 
 def check_settings(camera: Camera, rig_binning: int, pattern: dict, flow: dict, aperture_rays: int,
                    noise_variance: float, image_binning: int, render_binning: int, luminosity: float,
-                   gain_drift: float) -> None:
+                   gain_drift: float, gain_ramp: float = 0.0, shake_px: float = 0.0) -> None:
     """One sentence for a setting of :func:`realistic` that cannot run (``camera``: a training camera)."""
     PATTERNS.get(pattern["name"]), FLOW.get(flow["name"])
     if noise_variance < 0:
         raise ValueError(f"noise variance must be >= 0, got {noise_variance}")
-    if not luminosity >= 0 or not gain_drift > -1:
-        raise ValueError(f"data.sensor.luminosity={luminosity} must be at least 0 and data.sensor.gain_drift="
-                         f"{gain_drift} above -1")
+    if not luminosity >= 0 or not gain_drift > -1 or not gain_ramp > -1 or not shake_px >= 0:
+        raise ValueError(f"data.sensor.luminosity={luminosity} and data.sensor.shake_px={shake_px} must be at least "
+                         f"0, data.sensor.gain_drift={gain_drift} and data.sensor.gain_ramp={gain_ramp} above -1")
     aperture_points(aperture_rays, 1.0)
     for b, what in ((image_binning, "image_binning"), (render_binning, "render_binning")):
         if b < 1 or rig_binning % b and b % rig_binning:
@@ -112,19 +115,23 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
               view_start: torch.Tensor, step_mm: Optional[float], rig_binning: int, pattern: dict, flow: dict,
               aperture_rays: int = 60, wavelength_um: float = 0.5, noise_variance: float = 0.0,
               image_binning: int = 1, render_binning: Optional[int] = None, seed: int = 0, luminosity: float = 0.0,
-              gain_drift: float = 0.0, cache_dir=None):
+              gain_drift: float = 0.0, gain_ramp: float = 0.0, shake_px: float = 0.0, measure: Optional[dict] = None,
+              cache_dir=None):
     """Observed deflections of the training rays through the realistic BOS chain.
 
     Args:
         delta: (nx, ny, nz) true field on ``box`` (rendered from it). cameras: the training cameras.
         dirs, pixel, view_start: the training rays (see :class:`nerif.data.scene.Scene`).
-        pattern, flow: configs of a :data:`PATTERNS` and a :data:`FLOW` entry.
+        pattern, flow, measure: configs of a :data:`PATTERNS`, a :data:`FLOW` and a
+            :data:`nerif.sensing.measurement.MEASUREMENT` entry (None: the default stage).
         noise_variance: variance of the additive Gaussian noise on each image (intensities in [0, 1]).
         luminosity: the flame's own light added to the distorted image, at its brightest this fraction of the
             background's mean brightness, shaped like the flame's projection (the line integral of ``|delta|``
             along each pixel's ray).
         gain_drift: the distorted exposure's brightness over the reference's, less 1 (illumination drift):
-            0.1 = 10 % brighter.
+            0.1 = 10 % brighter. gain_ramp: that gain grows by this much more across the image, left to right.
+        shake_px: camera vibration between the exposures: each view's distorted image moved by a random shift,
+            this RMS per axis [px of the full sensor], drawn with ``seed`` (the record's ``shake_true_px``).
         step_mm: quadrature step of the aperture rays (default: one voxel of ``delta``; the aperture average
             is as accurate with it as with half a voxel, to 2e-5 on Phantom 5, at half the cost).
         cache_dir: where the aperture renderings (the costly part) are cached, keyed by the field and the
@@ -135,8 +142,10 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         training grid; ``displacement_rmse_px`` over the training rays; ``circle_of_confusion_px`` (V,) [image px].
     """
     render_binning = render_binning or rig_binning
+    measure = dict(measure or {"name": "default"})
+    MEASUREMENT.get(measure["name"])
     check_settings(cameras[0], rig_binning, pattern, flow, aperture_rays, noise_variance, image_binning, render_binning,
-                   luminosity, gain_drift)  # every check before the long work
+                   luminosity, gain_drift, gain_ramp, shake_px)  # every check before the long work
     step_mm = step_mm or box.voxel_mm
     field_key = hashlib.sha256(delta.cpu().numpy().tobytes()).hexdigest()
     eps_obs = torch.empty(len(dirs), 3, dtype=torch.float32)
@@ -156,15 +165,23 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
             glow = luminosity * glow / max(float(glow.max()), 1e-30)
         coc = circle_of_confusion(img_cam, wavelength_um)
         background = torch.as_tensor(PATTERNS.build(pattern, height=H, width=W, seed=seed * 1009 + v))
-        reference, distorted = exposures(background, torch.as_tensor(resample(u_ren, H, W)),
-                                         coc["d_diff_mm"] / img_cam.pitch_mm, noise_variance, gain_drift, glow,
-                                         torch.Generator().manual_seed(seed * 1009 + v))
-        m = measure_view(distorted, reference, flow, (cam.height, cam.width), image_binning, name=cam.name)
+        shake = np.random.default_rng(seed * 7919 + v).normal(0.0, shake_px, 2)  # px of the full sensor
+        rec.setdefault("shake_true_px", []).append(shake)
+        u_img = torch.as_tensor(resample(u_ren, H, W) + (shake / image_binning).astype(np.float32))
+        reference, distorted = exposures(background, u_img, coc["d_diff_mm"] / img_cam.pitch_mm, noise_variance,
+                                         gain_drift, glow, torch.Generator().manual_seed(seed * 1009 + v), gain_ramp)
+        sl = slice(int(view_start[v]), int(view_start[v + 1]))
+        pix = pixel[sl].cpu().numpy()
+        quiet = np.ones(cam.height * cam.width, bool)
+        quiet[pix] = False  # pixels whose ray misses the box
+        m = MEASUREMENT.build(measure, distorted=distorted, reference=reference, flow=flow,
+                              grid_px=(cam.height, cam.width), image_binning=image_binning,
+                              quiet=quiet.reshape(cam.height, cam.width), name=cam.name)
+        for k, x in m.found.items():
+            rec.setdefault(f"found/{k}", []).append(np.asarray(x, dtype=np.float64))
 
         u_true_t = resample(u_ren, cam.height, cam.width)
         u_est_t = m.displacement / np.float32(image_binning)  # the figures' unit: px of the images' grid
-        sl = slice(int(view_start[v]), int(view_start[v + 1]))
-        pix = pixel[sl].cpu().numpy()
         u_obs = torch.as_tensor(m.displacement.reshape(-1, 2)[pix], dtype=torch.float64)
         eps_obs[sl] = displacement_to_deflection(u_obs, dirs[sl].cpu().double(), cam.unbinned(rig_binning)).float()
         err = (u_est_t.reshape(-1, 2)[pix] - u_true_t.reshape(-1, 2)[pix]) ** 2
