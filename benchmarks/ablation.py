@@ -38,6 +38,11 @@ def progress_table(rows: list[dict], out: Path) -> str:
     return text
 
 
+def cell_folder(out: Path, i: int, cell: str) -> Path:
+    """The run folder of the ``i``-th cell (its overrides ``cell``) under ``out``."""
+    return out / f"{i}_{cell.replace(' ', '_').replace('=', '-')}"
+
+
 def run_cells(cells: list[str], settings: list[str], out: Path, resume: bool = False) -> list[dict]:
     """Each cell (a string of overrides, plus ``settings``) through :func:`nerif.app.run`, one after the other in
     this process; returns one row per cell: its metrics, total time and evaluation history. ``resume``: a cell
@@ -46,7 +51,7 @@ def run_cells(cells: list[str], settings: list[str], out: Path, resume: bool = F
     folder's earlier contents removed)."""
     rows = []
     for i, cell in enumerate(cells):
-        folder = out / f"{i}_{cell.replace(' ', '_').replace('=', '-')}"
+        folder = cell_folder(out, i, cell)
         if folder.exists() and not resume:
             shutil.rmtree(folder)
         again = ["train.resume=auto"] if resume and folder.exists() else []

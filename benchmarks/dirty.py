@@ -24,6 +24,7 @@ and rejected (mean over the views), and the wall time. Writes ``dirty.json`` and
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -31,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ablation import header, run_arguments, run_named, write_report  # noqa: E402
+from ablation import cell_folder, header, run_arguments, run_named, write_report  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 LEFT_OUT = ("saturated", "occluded", "unmeasured", "rejected")
@@ -89,7 +90,10 @@ def main(argv=None) -> dict:
                     choices=["clean", "shake", "light", "all", "capture", "dirty"])
     run_arguments(ap, "benchmarks/results/dirty")
     args = ap.parse_args(argv)
-    rows = run_named(rows_of(args.rows), args)
+    runs = rows_of(args.rows)
+    run_named(runs, args)
+    rows = {name: json.loads((cell_folder(Path(args.out), i, cell) / "metrics.json").read_text())  # every figure
+            for i, (name, cell) in enumerate(runs.items())}
     text = f"Dirty captures, {header(args.set, list(rows.values()))}\n\n{report(rows)}"
     payload = {k: {**{x: v for x, v in m.items() if x != "history"}, "shake_error_px": shake_error(k, m)}
                for k, m in rows.items()}

@@ -12,12 +12,13 @@ from nerif.encoders import ENCODERS
 from nerif.geometry import RIGS
 from nerif.masks import MASKS
 from nerif.renderers import SAMPLERS
-from nerif.sensing import FLOW, PATTERNS
+from nerif.sensing import FLOW, MEASUREMENT, PATTERNS
 from nerif.solvers import SOLVERS
 from nerif.solvers.data_terms import DATA_TERMS
 from tests.helpers import solver, tiny_config
 
-REGISTRIES = {"data": DATASETS, "data_term": DATA_TERMS, "encoder": ENCODERS, "flow": FLOW, "mask": MASKS, "pattern": PATTERNS,
+REGISTRIES = {"data": DATASETS, "data_term": DATA_TERMS, "encoder": ENCODERS, "flow": FLOW, "mask": MASKS,
+              "measure": MEASUREMENT, "pattern": PATTERNS,
               "phantom": PHANTOMS, "rig": RIGS, "sampler": SAMPLERS, "solver": SOLVERS}
 REQUIRED = {"phantom/file": ["phantom.path=x.npy", "phantom.voxel_mm=1.0"], "data/capture": ["data.root=x"],
             "data/transforms": ["data.root=x"]}  # values a config leaves to the user (???)

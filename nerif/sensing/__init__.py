@@ -1,8 +1,9 @@
 """BOS sensing: what a rig measures of a field (``SENSING``: ideal, perpendicular, realistic), background
-patterns (``PATTERNS``), finite-aperture optics, deflection <-> displacement, image formation and optical flow
-(``FLOW``)."""
+patterns (``PATTERNS``), finite-aperture optics, deflection <-> displacement, image formation, optical flow
+(``FLOW``) and the measurement stage of each view's images (``MEASUREMENT``)."""
 from nerif.sensing.flow import FLOW
+from nerif.sensing.measurement import MEASUREMENT
 from nerif.sensing.models import SENSING
 from nerif.sensing.patterns import PATTERNS
 
-__all__ = ["FLOW", "PATTERNS", "SENSING"]
+__all__ = ["FLOW", "MEASUREMENT", "PATTERNS", "SENSING"]
