@@ -125,7 +125,7 @@ class Evaluation:
         of image pixels: how well the deflections explain the held-out images themselves, whatever the flow says."""
         h = self.scene.heldout
         views, total, count, b = h.ray_views()[index], 0.0, 0, h.image_block()
-        u_all = h.to_displacement(eps.double(), index)  # px of the full sensor
+        u_all = h.to_displacement(eps.double(), index) + h.shake_px()[views]  # px of the full sensor, the shake in
         for v in views.unique().tolist():
             sel, im, cam = views == v, h.images[v], h.cameras[v]
             u = u_all[sel] / im.camera.binning  # px of the images' grid

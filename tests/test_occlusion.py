@@ -23,10 +23,12 @@ def test_a_dark_tube_without_texture_is_occluded_and_a_dimmer_textured_backgroun
     assert not hidden[:140].any()  # the dim half is still background
 
 
-def test_saturated_pixels_in_either_exposure_are_found_with_a_margin():
+def test_saturated_areas_in_either_exposure_are_found_with_a_margin_and_clipped_dots_are_not():
     ref, dist = background(), background()
     dist[50:60, 40:50] = 1.0  # the flame's light clipping the sensor
-    ref[100, 100] = 1.0
+    ref[120:130, 100:110] = 1.0  # a reflection in the reference
+    ref[100, 100] = dist[30, 30] = dist[31, 30] = 1.0  # the clipped centres of the pattern's dots
     s = saturated(dist, ref)
-    assert s[50:60, 40:50].all() and s[49, 45] and s[100, 101] and not s[120, 120]
-    assert s.sum() == (12 * 12 - 4) + 5  # the blob grown by 1 px (a disc: no corners), the pixel and its 4 neighbours
+    assert s[50:60, 40:50].all() and s[49, 45] and s[120:130, 100:110].all()
+    assert not s[100, 100] and not s[30, 30] and not s[80, 80]
+    assert s.sum() == 2 * (12 * 12 - 4)  # each square grown by 1 px (a disc: no corners)

@@ -44,12 +44,14 @@ def test_two_rows_per_ray_are_the_least_squares_of_every_pixel_of_its_block(scen
     A = displacement_matrix(scene.dirs[rays].double(), im.camera) * scene.scale
     ref, dist = (bandpass(i.double(), 8.0) for i in (im.reference, im.distorted))
     x = block_pixels(scene.pixel[rays], cam.width, b).double()
+    shift = scene.shake_px()[v] / im.camera.binning  # the view's measured shake: the images hold it
     h = 0.01  # the interpolant's gradient, by the central differences unified_system takes
-    gx = (sample(ref, (x + torch.tensor([h, 0.0])).reshape(-1, 2)) - sample(ref, (x - torch.tensor([h, 0.0])).reshape(-1, 2))) / (2 * h)
-    gy = (sample(ref, (x + torch.tensor([0.0, h])).reshape(-1, 2)) - sample(ref, (x - torch.tensor([0.0, h])).reshape(-1, 2))) / (2 * h)
+    xs = x + shift
+    gx = (sample(ref, (xs + torch.tensor([h, 0.0])).reshape(-1, 2)) - sample(ref, (xs - torch.tensor([h, 0.0])).reshape(-1, 2))) / (2 * h)
+    gy = (sample(ref, (xs + torch.tensor([0.0, h])).reshape(-1, 2)) - sample(ref, (xs - torch.tensor([0.0, h])).reshape(-1, 2))) / (2 * h)
     grad = torch.stack([gx, gy], -1).reshape(len(rays), -1, 2)
     xi = x.reshape(-1, 2).long()
-    diff = (dist[xi[:, 1], xi[:, 0]] - ref[xi[:, 1], xi[:, 0]]).reshape(len(rays), -1)
+    diff = (dist[xi[:, 1], xi[:, 0]] - sample(ref, xs.reshape(-1, 2))).reshape(len(rays), -1)
     gen = torch.Generator().manual_seed(1)
     e1, e2 = (0.05 * torch.randn(len(rays), 3, generator=gen, dtype=torch.float64) for _ in range(2))
 

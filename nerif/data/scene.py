@@ -138,6 +138,14 @@ class Scene:
         b, rest = next(iter(blocks))
         return b if len(blocks) == 1 and not rest and b >= 1 else None
 
+    def shake_px(self) -> torch.Tensor:
+        """(V, 2) float64: each view's rigid image shift between the exposures the measurement stage found and took
+        off its displacements [px of the full sensor] (zeros where none was measured). The images still hold it:
+        a term that compares them adds it back."""
+        shakes = (self.measured or {}).get("shake_px")
+        return torch.as_tensor(shakes if shakes is not None else np.zeros((self.n_views, 2)), dtype=torch.float64,
+                               device=self.dirs.device).reshape(self.n_views, 2)
+
     def unknown_image(self, view: int) -> Optional[np.ndarray]:
         """(height, width) bool: the pixels of ``view`` without a usable measurement, or None where every pixel
         has one."""

@@ -135,6 +135,9 @@ class ImageTerm:
                                                  (0, 0, MARGIN, MARGIN), mode="replicate")[0, 0])
         self.b, self.rows = b, H + 2 * MARGIN
         self.gain, self.scale = torch.cat(gain), torch.cat(scale)  # (N, 2, 3), (N,): per ray
+        # each view's shake between the exposures, which the images hold and the field does not [image px]
+        self.shake = (scene.shake_px() / torch.tensor([[im.camera.binning] for im in scene.images], dtype=torch.float64,
+                                                      device=device)).float()
         self.reference, self.distorted = torch.cat(refs), torch.cat(dists)  # (V (H + 2 MARGIN), W)
         self.weights, self.pixel_offsets = cell_weights(b, torch.float32, device)
         self.patch = patch
@@ -182,7 +185,7 @@ class ImageTerm:
         out = {}
         for name, e in eps.items():
             u = cells((A * e[:, None, :]).sum(-1))  # (C, 4, 2) [image px]
-            u = torch.einsum("pk,ckd->cpd", self.weights.to(u.dtype), u)  # (C, b^2, 2)
+            u = torch.einsum("pk,ckd->cpd", self.weights.to(u.dtype), u) + self.shake[views][:, None, :].to(u.dtype)
             r = photometric_residual(self.reference, self.distorted, x, u.reshape(-1, 2), self.mode)
             out[name] = (r.reshape(len(top), -1).pow(2).mean(-1) / self.scale[top]).mean()
         if self.flow_weight > 0:

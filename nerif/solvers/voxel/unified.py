@@ -50,7 +50,8 @@ def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: floa
         ref, dist = (bandpass(i.double(), highpass_px, lowpass_px) for i in (im.reference, im.distorted))
         x = block_pixels(scene.pixel[sl], cam.width, b).double()  # (n, P, 2)
         u0 = scene.displacement_px[sl].double() / im.camera.binning if linearize_at == "flow" else A.new_zeros(len(A), 2)
-        p = (x + u0[:, None, :]).reshape(-1, 2)
+        shake = scene.shake_px()[v] / im.camera.binning  # the view's shake, which the images hold
+        p = (x + u0[:, None, :] + shake.to(x.dtype)).reshape(-1, 2)
         grads = [(sample(ref, p + step_px * p.new_tensor(e)) - sample(ref, p - step_px * p.new_tensor(e))) / (2 * step_px)
                  for e in ((1.0, 0.0), (0.0, 1.0))]
         g = torch.stack(grads, -1).reshape(len(A), -1, 2)  # (n, P, 2)
