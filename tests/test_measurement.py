@@ -92,3 +92,14 @@ def test_a_saturated_blob_is_left_out_and_counted():
     m = measure_view(distorted, reference, {"name": "farneback"}, truth.shape[:2])
     assert not m.valid[20:25, 15:20].any() and m.valid[:15].all()
     assert m.found["saturated"] == pytest.approx((7 * 7) / m.valid.size, rel=0.1)  # the blob's blocks and a 1 px rim
+
+
+def test_a_view_that_loses_most_of_its_pixels_says_so_with_the_cause(caplog):
+    """A view whose reference is mostly hidden (a mount in front of the background) keeps a quarter of its pixels:
+    one warning names the view and the cause, not a later 'no pixel sees the box'."""
+    distorted, reference, truth = flame_pair()
+    reference[:150], distorted[:150] = 0.05, 0.05  # three quarters of the view without texture
+    with caplog.at_level("WARNING"):
+        m = measure_view(distorted, reference, {"name": "farneback"}, truth.shape[:2], name="camera 3")
+    assert m.found["occluded"] > 0.6
+    assert "camera 3: " in caplog.text and "% occluded" in caplog.text and "no usable displacement" in caplog.text

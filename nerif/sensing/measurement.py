@@ -18,7 +18,7 @@ import numpy as np
 
 from nerif.registry import Registry
 from nerif.sensing.flame_light import without_flame_light
-from nerif.sensing.flow import FLOW
+from nerif.sensing.flow import FLOW, normalise_width
 from nerif.sensing.imaging import resample
 from nerif.sensing.occlusion import occluded
 from nerif.sensing.saturation import saturated
@@ -27,6 +27,7 @@ from nerif.sensing.vectors import median_test
 
 log = logging.getLogger(__name__)
 MEASUREMENT = Registry("measurement stage", package="nerif.sensing")
+LOST_WARNING = 0.5  # a view that keeps less than this share of its region is said to, with the causes
 
 
 @dataclass
@@ -79,7 +80,7 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
             (:func:`~nerif.sensing.flame_light.without_flame_light`) after the saturated pixels are found; None.
         name: the view, for the log. keep_flow: keep the image-grid flow in the result.
         saturation: leave out pixels at the top of the range in either exposure (:mod:`~nerif.sensing.saturation`).
-        occlusion_fraction: leave out pixels whose reference texture has less than this share of the view's median
+        occlusion_fraction: leave out pixels whose reference texture has less than this share of the view's background
             contrast (a burner, a mount; :mod:`~nerif.sensing.occlusion`); 0: keep all.
         shake: estimate the view's rigid shift between the exposures and take it off (:mod:`~nerif.sensing.shake`).
         median_threshold, median_eps_px: the normalised median test's threshold and noise floor [px of the full
@@ -88,8 +89,9 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     h, w = grid_px
     valid = np.ones((h, w), bool) if region is None else np.asarray(region, dtype=bool).copy()
     found = {}
-    for what, hidden in (("saturated", saturated(distorted, reference) if saturation else None),
-                         ("occluded", occluded(reference, fraction=occlusion_fraction) if occlusion_fraction else None)):
+    width = normalise_width("auto", reference)  # the texture's own scale, measured once for both detectors
+    for what, hidden in (("saturated", saturated(distorted, reference, width_px=width) if saturation else None),
+                         ("occluded", occluded(reference, occlusion_fraction, width) if occlusion_fraction else None)):
         lost = _on_grid(hidden, h, w) & valid if hidden is not None else np.zeros((h, w), bool)
         found[what] = float(lost.mean())
         valid &= ~lost
@@ -116,4 +118,9 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
                      if found[k] > 0)
     log.info("%s: displacement up to %.2f px; shake (%+.3f, %+.3f) px taken off%s", name or "view", peak, s[0], s[1],
              f"; left out: {left}" if left else "")
+    region_share = float(np.mean(region)) if region is not None else 1.0
+    if region_share > 0 and found["valid_fraction"] < LOST_WARNING * region_share:
+        log.warning("%s: %.0f %% of its region of interest has no usable displacement (%s): look at its images; "
+                    "the settings are measure.* and flow.*", name or "view",
+                    100 * (1 - found["valid_fraction"] / region_share), left)
     return ViewMeasurement(u, valid, found, distorted, u_image if keep_flow else None)

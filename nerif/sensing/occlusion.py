@@ -2,6 +2,8 @@
 image has no texture, and a flow vector there is noise; a ray there is blocked, not a ray that crossed empty gas."""
 from __future__ import annotations
 
+from typing import Optional
+
 import cv2
 import numpy as np
 
@@ -16,17 +18,18 @@ def local_contrast(image: np.ndarray, width_px: float) -> np.ndarray:
     return np.sqrt(cv2.GaussianBlur(detail * detail, (0, 0), float(width_px)))
 
 
-def occluded(reference: np.ndarray, fraction: float = 0.25) -> np.ndarray:
+def occluded(reference: np.ndarray, fraction: float = 0.25, width_px: Optional[float] = None) -> np.ndarray:
     """(H, W) bool: the pixels where ``reference`` (H, W) shows no texture: its :func:`local_contrast` over the
     texture's own scale (the flow's normalisation width, :func:`nerif.sensing.flow.normalise_width`) below
-    ``fraction`` of the image's median contrast, grown by 3 such widths (the contrast window and the flow's window
+    ``fraction`` of the background's contrast (the view's median, or half that of its best-textured tenth where
+    most of the view is hidden), grown by 3 such widths (the contrast window and the flow's window
     reach that far across the occluder's edge). A speckle background keeps its contrast within a factor of two or so
-    across the image (illumination falls off smoothly, and the contrast is taken relative to it only through the
-    median); a dark burner tube or mount has none. On the shared dirty capture's burner (5.4 % of each image):
-    0.02 % of its pixels missed, none taken beside it."""
-    width = normalise_width("auto", reference)
+    across the image (illumination falls off smoothly); a dark burner tube or mount has none. On the shared dirty capture's burner (5.4 % of each image):
+    0.02 % of its pixels missed, none taken beside it. ``width_px``: the texture's width where the caller has it."""
+    width = width_px or normalise_width("auto", reference)
     c = local_contrast(reference, width)
-    level = float(np.median(c))
+    # the background's contrast: the median, unless most of the view is hidden (then half its best-textured tenth's)
+    level = max(float(np.median(c)), 0.5 * float(np.percentile(c, 90)))
     if not level > 0:
         return np.zeros(c.shape, bool)
     hidden = (c < fraction * level).astype(np.uint8)
