@@ -10,7 +10,9 @@ Rows (``--rows``):
   (``data.sensor.shake_px``);
 - ``light``: the flame's own light (30 % of the background's mean at its brightest) and an uneven illumination drift
   (a gain ramping from 1 to 1.1 across the distorted image);
-- ``all``: both;
+- ``burner``: an opaque burner tube on the axis, 6 mm in radius, its top at the probe box's bottom face
+  (``data.sensor.burner_radius_mm``);
+- ``all``: all three;
 - ``capture``: ``../shared/data/independent_capture_bunsen`` (rendered by a separate program), scored against its
   ``volume.npz``;
 - ``dirty``: ``../shared/data/independent_capture_bunsen_dirty``: the same flame with the flame's light, a gain
@@ -19,7 +21,8 @@ Rows (``--rows``):
 
 Columns: sigma error, T RMSE, the flow's error against the true displacements (the chain's record), the largest
 error of the shakes found against the true ones, the shares of pixels left out as saturated, occluded, unmeasured
-and rejected (mean over the views), and the wall time. Writes ``dirty.json`` and ``dirty.md`` under ``--out``.
+and rejected (mean over the views), the true share of occluded pixels (the ray grid's blocks that see some of the
+burner), and the wall time. Writes ``dirty.json`` and ``dirty.md`` under ``--out``.
 """
 from __future__ import annotations
 
@@ -43,8 +46,9 @@ def rows_of(names: list[str]) -> dict[str, str]:
             for k, f in (("capture", "independent_capture_bunsen"), ("dirty", "independent_capture_bunsen_dirty"))}
     chain = "data.sensing=realistic"
     light = "data.sensor.luminosity=0.3 data.sensor.gain_ramp=0.1"
+    burner = "data.sensor.burner_radius_mm=6"
     all_rows = {"clean": chain, "shake": f"{chain} data.sensor.shake_px=0.1", "light": f"{chain} {light}",
-                "all": f"{chain} {light} data.sensor.shake_px=0.1", **real}
+                "burner": f"{chain} {burner}", "all": f"{chain} {light} {burner} data.sensor.shake_px=0.1", **real}
     return {k: all_rows[k] for k in names}
 
 
@@ -68,26 +72,40 @@ def shake_error(row_name: str, m: dict):
     return float(np.abs(est - truth[idx]).max())
 
 
+def true_occluded(row_name: str, m: dict):
+    """The true share of occluded pixels (mean over the views; None without a truth): the chain's record, or the
+    dirty capture's ``true_disp.npz`` on the run's ray grid (blocks of ``ray_binning`` with any occluded pixel)."""
+    if "occluded_true" in m:
+        return float(np.mean(m["occluded_true"]))
+    if row_name == "dirty":
+        occ = np.load(SHARED / "independent_capture_bunsen_dirty" / "true_disp.npz")["occluded"]
+        b = int(m.get("ray_binning", 1))
+        v, h, w = occ.shape
+        return float(occ[:, :h - h % b, :w - w % b].reshape(v, h // b, b, w // b, b).any((2, 4)).mean())
+    return 0.0 if row_name in ("clean", "shake", "light", "capture") else None
+
+
 def report(rows: dict) -> str:
     lines = ["| row | sigma error | T RMSE [K] | flow error [px] | shake error (max) [px] | "
-             + " | ".join(f"{k} [%]" for k in LEFT_OUT) + " | wall [s] | warnings |",
-             "|---|---|---|---|---|" + "---|" * len(LEFT_OUT) + "---|---|"]
+             + " | ".join(f"{k} [%]" for k in LEFT_OUT) + " | occluded, true [%] | wall [s] | warnings |",
+             "|---|---|---|---|---|" + "---|" * len(LEFT_OUT) + "---|---|---|"]
     for name, m in rows.items():
         found = m.get("measurement") or {}
         share = {k: 100 * np.mean([f.get(k, 0.0) for f in found.values()]) if found else None for k in LEFT_OUT}
-        err = shake_error(name, m)
+        err, occ = shake_error(name, m), true_occluded(name, m)
         fmt = (lambda v, f: f.format(v) if isinstance(v, (int, float)) and v is not None else "-")
         lines.append(f"| {name} | {fmt(m.get('sigma_relative_error'), '{:.4f}')} | "
                      f"{fmt(m.get('temperature_rmse_K'), '{:.2f}')} | {fmt(m.get('displacement_rmse_px'), '{:.4f}')} | "
                      f"{fmt(err, '{:.4f}')} | " + " | ".join(fmt(share[k], '{:.2f}') for k in LEFT_OUT)
+                     + f" | {fmt(None if occ is None else 100 * occ, '{:.2f}')}"
                      + f" | {fmt(m.get('wall_time_s'), '{:.0f}')} | {len(m.get('warnings', []))} |")
     return "\n".join(lines) + "\n"
 
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--rows", nargs="+", default=["clean", "shake", "light", "all", "capture", "dirty"],
-                    choices=["clean", "shake", "light", "all", "capture", "dirty"])
+    names = ["clean", "shake", "light", "burner", "all", "capture", "dirty"]
+    ap.add_argument("--rows", nargs="+", default=names, choices=names)
     run_arguments(ap, "benchmarks/results/dirty")
     args = ap.parse_args(argv)
     runs = rows_of(args.rows)
@@ -95,8 +113,8 @@ def main(argv=None) -> dict:
     rows = {name: json.loads((cell_folder(Path(args.out), i, cell) / "metrics.json").read_text())  # every figure
             for i, (name, cell) in enumerate(runs.items())}
     text = f"Dirty captures, {header(args.set, list(rows.values()))}\n\n{report(rows)}"
-    payload = {k: {**{x: v for x, v in m.items() if x != "history"}, "shake_error_px": shake_error(k, m)}
-               for k, m in rows.items()}
+    payload = {k: {**{x: v for x, v in m.items() if x != "history"}, "shake_error_px": shake_error(k, m),
+                   "occluded_true_share": true_occluded(k, m)} for k, m in rows.items()}
     write_report(Path(args.out), "dirty", payload, text)
     return rows
 

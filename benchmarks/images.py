@@ -21,6 +21,9 @@ flow's deflections) and unified (the images' linearised equations, ``data_term=i
 weights, the best chosen with the truth (lowest error over every weight and evaluation: the harshest comparison
 for nerif). Writes ``images.json`` and ``images.md`` (the table, and each target of the issue met or missed)
 under ``--out``.
+
+The same comparison on dirty data (the flame's light, vibration, a burner in the view; each effect alone and all
+at once, with the measurement stage's findings against their truth) is ``benchmarks/dirty.py``.
 """
 from __future__ import annotations
 

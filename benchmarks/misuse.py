@@ -105,6 +105,20 @@ def fixtures(work: Path) -> dict:
 
     fx["mixed_depth"] = capture_variant("mixed_depth")
     deepen(fx["mixed_depth"])
+
+    def one_view(name: str, edit) -> None:  # issue 38: one view's images spoilt, the rig file as it was
+        import cv2
+
+        fx[name] = capture_variant(name)
+        d, r = fx[name] / "distorted_01.png", fx[name] / "reference_01.png"
+        dist, ref = (cv2.imread(str(p), cv2.IMREAD_UNCHANGED) for p in (d, r))
+        for path, img in zip((d, r), edit(dist, ref)):
+            cv2.imwrite(str(path), img)
+
+    one_view("view_black", lambda dist, ref: (np.zeros_like(dist), ref))
+    one_view("view_saturated", lambda dist, ref: (np.full_like(dist, 255), ref))
+    one_view("view_copy", lambda dist, ref: (ref, ref))
+    one_view("view_swapped", lambda dist, ref: (ref, dist))
     T = np.load(fx["run"] / "reconstruction.npz")["T"]
     np.save(work / "T.npy", T)
     for name, edit in (("fl_x_negative", {"fl_x": -5618.7}), ("image_range_zero", {"image_max": -16.8897858}),
@@ -156,6 +170,8 @@ def cases(work: Path, fx: dict) -> list[Case]:
         Case("resume_other_scene", nerif(*TINY, "phantom.width_mm=9.0", f"train.resume={run / 'checkpoint.pt'}",
                                          out("resume_other")), "refuse", "made by another run", kept),
         Case("swapped_images", nerif(*cap(fx["swapped"]), out("swapped")), "refuse", "look swapped"),
+        *[Case(f"one_{k}", nerif(*cap(fx[k]), out(k)), "warn", "camera 1 (41.2 deg) is left out") for k in
+          ("view_black", "view_saturated", "view_copy", "view_swapped")],
         Case("background_before_probe", nerif(*cap(fx["background_near"]), out("bg")), "refuse",
              "camera.camera_to_background_mm"),
         Case("negative_focal_length", nerif(*TINY, "rig.focal_mm=-105", out("focal")), "refuse", "rig.focal_mm"),

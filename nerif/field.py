@@ -160,14 +160,16 @@ def check_truth_within(truth_T: Optional[np.ndarray], ambient: Ambient, prior: t
 
 
 def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Ambient,
-                     truth_T: Optional[np.ndarray] = None) -> dict:
+                     truth_T: Optional[np.ndarray] = None, failed: str = "") -> dict:
     """What a reconstruction ``sigma`` says about the prior's bounds, for ``metrics.json``: the share of the flame
     (voxels below -0.05) within 1 % of the lower bound (``warnings`` over 1 %: the flame may be hotter than
     ``data.T_max`` lets the field be), and the share of the probe box within 1 % of the upper, cold bound
     (``warnings`` over 5 %: a flame holds no gas much colder than ambient, so a field pressed there was fitted to
     data it cannot explain: deflections of the wrong sign, or a geometry that does not match the images; normal
     runs leave none there, the multicam capture read without its lens model 2 %). With a known truth
-    (``truth_T`` [K]) far from the hot bound, a flame at that bound is said to be a fit gone astray instead."""
+    (``truth_T`` [K]) far from the hot bound, a flame at that bound is said to be a fit gone astray instead; so it is
+    where the held-out views say the fit failed (``failed``: :func:`nerif.io.outputs.failed_fit`'s sentence): the
+    data then do not support a hotter flame, and raising the bound is not the advice."""
     a, b = prior
     flame = sigma < -0.05
     share = float((sigma[flame] <= a + 0.01 * (b - a)).mean()) if flame.any() else 0.0
@@ -183,6 +185,10 @@ def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Amb
         warn.append(f"{100 * share:.1f} % of the flame sits at the hottest the field can hold, while the known truth "
                     f"peaks at {float(truth_T.max()):.0f} K, far from it: the fit went astray (lower train.lr), "
                     "rather than a flame hotter than data.T_max")
+    elif share > 0.01 and failed:
+        warn.append(f"{100 * share:.1f} % of the flame sits at the hottest the field can hold, but the held-out views "
+                    "say the fit failed, so the data do not support a hotter flame: raising data.T_max would not help; "
+                    "look at the measurement first")
     elif share > 0.01:
         what = (f"the hottest {ambient.temperature_from_sigma(np.float64(a)):.0f} K the field can hold "
                 f"(data.T_max={ambient.T_max:g} K)" if ambient.temperature_known else f"the prior's bound sigma = {a:g}")

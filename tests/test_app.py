@@ -258,6 +258,21 @@ def test_the_summary_line_names_each_held_out_figure_as_metrics_json_does():
     assert "PSNR undefined (no deflection seen)" in line  # not "PSNR -inf dB"
 
 
+def test_the_share_of_the_held_out_displacements_explained_falls_with_the_fit_and_leads_the_summary():
+    """Issue 38: a quality figure without a truth: 1 - (fit RMSE / no-flame RMSE)^2 of the held-out view, 0.75 for
+    an RMSE half the displacements' own, negative for a fit worse than no flame; first of the held-out figures."""
+    from nerif.io.outputs import heldout_explained, summary_line
+
+    m = {"heldout_displacement_rmse_px": 0.05, "heldout_displacement_rmse_px_none": 0.1}
+    assert heldout_explained(m) == {"heldout_explained": 0.75}
+    assert heldout_explained({**m, "heldout_displacement_rmse_px": 0.12})["heldout_explained"] < 0
+    assert heldout_explained({"heldout_displacement_rmse_px": 0.05}) == {}
+    line = summary_line({"deflection_rmse": 1e-5, "heldout_deflection_rmse": 2e-5, "heldout_psnr_db": 19.5,
+                         "heldout_explained": 0.75, "iterations": 10, "wall_time_s": 1.0, "total_time_s": 2.0,
+                         "ms_per_iteration": 100.0}, Path("out"))
+    assert "held out: 75 % of its displacements explained; deflection RMSE 2e-05 rad" in line
+
+
 def test_help_says_what_nerif_does_and_lists_the_groups():
     r = nerif("--help", cwd=ROOT)
     assert r.returncode == 0 and "powered by Hydra" not in r.stdout

@@ -45,7 +45,10 @@ def test_the_image_term_is_least_at_the_true_field_below_the_flows_deflections(r
         return float(term.terms({"discrete": e}, batch, 0)["discrete"])
 
     truth = cost(eps)
-    assert truth < 0.75 * cost(scene.observed[batch.index])  # the flow's error is what the images do not show
+    # the flow's error is what the images do not show: the truth's cost 0.89 (patch 2) and 0.96 (patch 4) of the
+    # flow's, its images normalised over 8 px (0.6-0.7 when they were normalised over 2 px, a worse flow). The
+    # chain's warp (PyTorch's bicubic kernel, which shifts by more than asked: issue 39) limits the truth's lead.
+    assert truth < cost(scene.observed[batch.index])
     assert truth < 0.6 * min(cost(0.5 * eps), cost(1.5 * eps)) and truth < 0.2 * cost(0 * eps)
 
 
@@ -134,8 +137,9 @@ def test_auto_fits_the_flow_where_rays_lie_at_every_image_pixel():
 def test_on_a_tiny_capture_training_on_the_images_ends_closer_to_the_truth_than_the_flow(tmp_path):
     """A capture folder (8-bit images through the realistic chain, an f/32 aperture) of a 3 mm flame, read back
     through the optical flow, trained 200 iterations: the default (images where the data hold them, the flow
-    term beside) ends with a sigma error below the flow's alone (measured: 0.179 against 0.186; 0.173 against 0.189
-    with the flow normalised over 8 px, before flow.normalise_px=auto)."""
+    term beside) ends with a sigma error below the flow's alone (measured: 0.173 against 0.189; 0.179 against 0.186
+    with the flow normalised over the texture's width, which ``flow.normalise_px=auto`` keeps for views that show
+    the flame's light)."""
     from omegaconf import OmegaConf
 
     from nerif.app import run
@@ -153,4 +157,30 @@ def test_on_a_tiny_capture_training_on_the_images_ends_closer_to_the_truth_than_
                               f"data.truth={root / 'volume.npz'}", "train.iterations=200", "train.eval_every=200",
                               f"data_term={term}", synthetic=False)
         error[term] = run(run_cfg, tmp_path / term)["sigma_relative_error"]
-    assert error["auto"] < 0.98 * error["flow"], error
+    assert error["auto"] < 0.95 * error["flow"], error
+
+
+def test_a_shake_measured_wrong_is_refined_by_the_images_where_the_field_explains_them(realistic):
+    """Issue 37: the image term refines each view's shake with the field (``shake_lr``). With the true field's
+    deflections and the first view's shake put off by (0.3, -0.2) image px, fitting the corrections alone brings that
+    view's shake back to what the images hold (the measured one, within 0.03 image px), and leaves the others."""
+    cfg, scene = realistic
+    ph = PHANTOMS.build(group(cfg, "phantom"))
+    delta = torch.as_tensor(ph.delta, dtype=torch.float32)
+    term = image_term(scene, shake_lr=0.01)
+    binning = term.binning.float()
+    measured = term.shakes_px().float() / binning  # image px
+    with torch.no_grad():
+        term.shake[0] += torch.tensor([0.3, -0.2])
+    optimiser = torch.optim.Adam(term.parameter_groups())
+    for it in range(150):
+        batch = term.draw(it)
+        eps = voxel_deflection(delta, ph.box, batch.origins, batch.dirs) / scene.scale
+        loss = term.terms({"d": eps}, batch, it)["d"]
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+    refined = term.shakes_px().float() / binning
+    assert float((refined[0] - measured[0]).abs().max()) < 0.03, (refined[0], measured[0])
+    assert float((refined[1:] - measured[1:]).abs().max()) < 0.03
+    assert image_term(scene, shake_lr=0.0).parameter_groups() == [] and image_term(scene, shake_lr=0.0).shakes_px() is None

@@ -245,6 +245,8 @@ def test_a_flame_at_the_prior_bound_is_reported_with_the_setting_to_raise():
     cool = np.full_like(sigma, 600.0)
     astray = prior_saturation(sigma, tr.interval, tr.scene.ambient, cool)["warnings"][0]
     assert "the known truth peaks at 600 K, far from it: the fit went astray (lower train.lr)" in astray
+    failed = tr.saturation(sigma, "the fit failed: ...")["warnings"]  # issue 37: the held-out views disagree
+    assert len(failed) == 1 and "raise data.T_max" not in failed[0] and "do not support a hotter flame" in failed[0]
     sigma[5:8] = 0.05  # a field pressed against the cold bound (sigma <= 0.05) over 30 % of the box
     out = tr.saturation(sigma)
     assert out["box_at_cold_bound"] == pytest.approx(0.3) and "pull the field colder than ambient" in out["warnings"][0]

@@ -89,3 +89,32 @@ def test_the_circle_of_confusion_is_each_views_own(tmp_path):
     own = [circle_of_confusion(c.unbinned(c.binning))["d_mm"] / (c.pitch_mm / c.binning) for c in scene.cameras]
     assert coc.shape == (3,) and np.ptp(coc) > 0.01 * coc.max()
     np.testing.assert_allclose(coc, own, rtol=1e-9)
+
+
+def test_an_opaque_burner_is_dark_in_both_exposures_found_occluded_and_left_unknown():
+    """Issue 37: ``burner_radius_mm``: the tube's pixels (:func:`nerif.sensing.burner.burner_pixels`, tested on their
+    own in ``test_burner.py``) are dark and without texture in both exposures; the measurement stage finds them
+    occluded, and they carry no ray."""
+    from nerif.sensing.burner import DARK, burner_pixels
+    from nerif.geometry import RIGS
+
+    scene = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], burner_radius_mm=6.0)))
+    tube = burner_pixels(RIGS.build(REALISTIC["rig"])[0].unbinned(40).binned(8), 6.0, -16.0)  # the images' grid
+    for images in (scene.sensing["reference"][0], scene.sensing["distorted"][0]):
+        assert abs(float(np.median(images[tube])) - 255 * DARK) < 3  # dark
+        assert float(images[tube].std()) < 5 < 30 < float(images[~tube].std())  # and without the pattern's texture
+    found, true = scene.sensing["found/occluded"], scene.sensing["occluded_true"]
+    assert np.all(found >= 0.9 * true) and np.all(found < true + 0.1), (found, true)
+    hidden = (torch.nn.functional.avg_pool2d(torch.as_tensor(tube, dtype=torch.float32)[None], 5)[0] > 0).numpy()
+    ideal = DATASETS.build(dict(REALISTIC, sensing="ideal"))
+    crossing = np.zeros(hidden.size, bool)  # the blocks whose ray crosses the probe box
+    crossing[ideal.pixel[ideal.view_slice(0)].numpy()] = True
+    crossing = crossing.reshape(hidden.shape)
+    assert (hidden & crossing).any() and not scene.valid_images[0][hidden & crossing].any()  # unknown: no carving
+
+
+def test_light_brighter_than_full_scale_clips_and_the_stage_counts_it():
+    """The flame's light (its blur is tested in ``test_emission.py``) brighter than the sensor's full scale
+    saturates the distorted image, and the measurement stage counts those pixels."""
+    bright = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], luminosity=20.0)))  # clips an area
+    assert (bright.sensing["distorted"] == 255).any() and (bright.sensing["found/saturated"] > 0).all()

@@ -13,22 +13,26 @@ the frames of a series (:func:`rig_geometry`).
 from __future__ import annotations
 
 import hashlib
+import logging
 from pathlib import Path
 from typing import Optional
 
 import numpy as np
 import torch
 
-from nerif.data.capture_images import capture_files, check_images, read_images
+from nerif.data.capture_images import capture_files, check_images, lossy_images, occluder_masks, read_images
 from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest, resolve_binning
 from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.rig_file import RigFile, read_rig
+from nerif.data.view_check import screened
 from nerif.data.scene import (DATASETS, Scene, ViewImages, found_per_view, heldout_views, outside_the_box,
                               scene_from_displacements)
 from nerif.geometry import Camera, rays_in_box
 from nerif.physics import Ambient
 from nerif.sensing.flow import FLOW
 from nerif.sensing.measurement import MEASUREMENT
+
+log = logging.getLogger(__name__)
 
 
 def rig_cameras(rig: RigFile, binning=1) -> tuple[list[Camera], list[Camera]]:
@@ -149,15 +153,20 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
     truth_T = read_truth(truth, rig.box) if truth is not None else None
     flame = [rig.root / f for f in rig.flame_only or ()]
     check_images(distorted + references + flame, rig.sensor_px)  # one bit depth for all, from the headers
+    lossy = lossy_images(distorted + references)
+    if lossy:
+        log.warning("%s", lossy)
     images, refs = read_images(distorted, rig.sensor_px), reference_images(references, rig.sensor_px)
     flames = reference_images(flame, rig.sensor_px, "flame") if flame else [None] * len(images)
+    hidden = occluder_masks(rig, lambda paths: reference_images(paths, rig.sensor_px, "occluders"))
     quiet = outside_the_box(cameras, rays)
     measured = [MEASUREMENT.build(measure, distorted=images[v], reference=refs[v], flow=flow, flame=flames[v],
-                                  grid_px=(cam.height, cam.width), region=roi, quiet=quiet[v], name=cam.name)
+                                  hidden=hidden[v], grid_px=(cam.height, cam.width), region=roi, quiet=quiet[v],
+                                  name=cam.name)
                 for v, cam in enumerate(cameras)]
     views = [ViewImages(torch.as_tensor(r, device=device), torch.as_tensor(m.distorted, device=device), cam)
              for r, m, cam in zip(refs, measured, full)]
     scene = scene_from_displacements(rig.box, rig.ambient, cameras, [m.displacement for m in measured],
                                      [m.valid for m in measured], device=device, rays=rays, sigma_prior=prior,
                                      images=views, truth_T=truth_T, measured=found_per_view(measured))
-    return scene.split_views(held)
+    return screened(scene, held)

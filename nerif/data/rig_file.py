@@ -58,6 +58,8 @@ class RigFile:
         sources: the files it was read from: the rig file and its calibration file, if any.
         flame_only: (V,) each view's exposure of the flame alone (the background switched off), where the rig
             recorded one (the key ``flame_only``), else None: its light is taken off the distorted image.
+        occluders: (V,) each view's mask image of what hides its background (a burner, a mount; nonzero: hidden),
+            or None for a view without one (the key ``occluders``); None: none given. Hidden pixels are unknown.
     """
 
     path: Path
@@ -75,6 +77,7 @@ class RigFile:
     calibrated: Optional[tuple[Camera, ...]] = None
     sources: tuple[Path, ...] = ()
     flame_only: Optional[tuple[str, ...]] = None
+    occluders: Optional[tuple[Optional[str], ...]] = None
 
     @property
     def root(self) -> Path:
@@ -161,6 +164,11 @@ def read_rig(root: Path) -> RigFile:
     if flame is not None and (not isinstance(flame, list) or len(flame) != len(angles)):
         raise ValueError(f"{path}: flame_only must list one image per view ({len(angles)}), each the view's exposure "
                          "of the flame with the background switched off")
+    occluders = rig.get("occluders")
+    if occluders is not None and (not isinstance(occluders, list) or len(occluders) != len(angles)
+                                  or not all(o is None or isinstance(o, str) for o in occluders)):
+        raise ValueError(f"{path}: occluders must list one mask image per view ({len(angles)}; null for a view with "
+                         "none), nonzero where something hides the background")
     t_range = rig.get("temperature_range_K")
     if t_range is not None:
         lo, hi = (float(t) for t in t_range)
@@ -171,7 +179,8 @@ def read_rig(root: Path) -> RigFile:
                    tuple(int(v) for v in held) if held is not None else None,
                    (lo, hi) if t_range is not None else None, lens, calibrated,
                    (path,) + ((path.parent / str(rig["calibration"]),) if "calibration" in rig else ()),
-                   tuple(str(f) for f in flame) if flame is not None else None)
+                   tuple(str(f) for f in flame) if flame is not None else None,
+                   tuple(occluders) if occluders is not None else None)
 
 
 def _arc_lens(path: Path, rig: dict) -> tuple[ArcLens, tuple[int, int]]:

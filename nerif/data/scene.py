@@ -206,11 +206,14 @@ class Scene:
 
 
 def _gathered(rays: tuple, images: list[np.ndarray], valid: list[np.ndarray], cameras: list[Camera],
-              box: ProbeBox):
+              box: ProbeBox, measured: bool = False):
     """Per-pixel ``images`` (per view, (height, width, C)) at each ray of ``rays`` (origins, dirs, pixel,
     view_start), and the rays kept: those whose pixel is ``valid`` with finite values; one sentence for a view left
-    with no ray. Returns (origins, dirs, values (N, C), pixel, view_start) of the kept rays."""
+    with no ray (``measured``: only for a view with no ray through the box at all; one whose measurement left none
+    is kept empty, for :mod:`nerif.data.view_check` to name and leave out). Returns (origins, dirs, values (N, C),
+    pixel, view_start) of the kept rays."""
     origins, dirs, pixel, view_start = rays
+    crossing = view_start.diff().tolist()
     device = dirs.device
 
     def per_ray(per_view, dtype):
@@ -225,7 +228,7 @@ def _gathered(rays: tuple, images: list[np.ndarray], valid: list[np.ndarray], ca
     keep &= torch.isfinite(values).all(-1)
     dirs, values, pixel, view_start = keep_rays(dirs, values, pixel, view_start, keep)
     for v, n in enumerate(view_start.diff().tolist()):
-        if n == 0:
+        if n == 0 and (crossing[v] == 0 or not measured):
             raise ValueError(f"{cameras[v].name}: no pixel of its region of interest sees the probe box "
                              f"{box.extent_mm.tolist()} mm: check the region of interest, the pose and the probe box")
     return origins, dirs, values, pixel, view_start
@@ -264,7 +267,7 @@ def scene_from_displacements(box: ProbeBox, ambient: Ambient, cameras: list[Came
         rays, fields: as for :func:`scene_from_images`.
     """
     rays = rays_in_box(box, cameras, device) if rays is None else rays
-    origins, dirs, u, pixel, view_start = _gathered(rays, displacements, valid, cameras, box)
+    origins, dirs, u, pixel, view_start = _gathered(rays, displacements, valid, cameras, box, measured=True)
     eps = torch.cat([displacement_to_deflection(u[view_start[v]:view_start[v + 1]],
                                                 dirs[view_start[v]:view_start[v + 1]].double(),
                                                 cam.unbinned(cam.binning)) for v, cam in enumerate(cameras)])

@@ -9,8 +9,10 @@ from __future__ import annotations
 import logging
 import re
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
+import torch
 
 from nerif.io.export import write_npz, write_png, write_vti
 from nerif.io.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
@@ -69,6 +71,17 @@ def write_heldout(solver, out_dir: Path) -> dict:
     return ev.heldout_errors(solver.predict, every=True, pred=pred)
 
 
+def heldout_explained(m: dict) -> dict:
+    """The quality figure a user without a truth can read: the share of the held-out view's measured displacements
+    (their mean square) that the fit explains, ``1 - (heldout_displacement_rmse_px / ..._none)^2``
+    (``heldout_explained``): near 1 where the fit and the data agree, falling as the data get noisier or the views
+    disagree, below 0 for a failed fit. Empty without held-out displacements."""
+    fit, none = m.get("heldout_displacement_rmse_px"), m.get("heldout_displacement_rmse_px_none")
+    if fit is None or not none:
+        return {}
+    return {"heldout_explained": float(1.0 - (fit / none) ** 2)}
+
+
 def failed_fit(m: dict) -> str:
     """One sentence where the held-out views say the fit failed: its prediction explains their images, or their
     displacements, worse than no flame at all would (``heldout_*`` against ``heldout_*_none``); else ""."""
@@ -100,8 +113,10 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
                 out_dir / "curves.png")
     final = dict(solver.history[-1]) if solver.history else solver.evaluate()
     final.pop("iteration", None)
+    failed = ""
     if scene.heldout is not None:
         final.update(write_heldout(solver, out_dir))  # every held-out ray, not the evaluation subset
+        final.update(heldout_explained(final))
         failed = failed_fit(final)
         if failed:
             log.warning("%s", failed)
@@ -113,7 +128,7 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     final.update(solver.labels)
     final["ray_binning"] = int(scene.cameras[0].binning)  # sensor pixels across a ray
     final.update(solver.report)
-    final.update(solver.saturation(sigma))
+    final.update(solver.saturation(sigma, failed))
     if scene.sensing is not None:
         final["displacement_rmse_px"] = float(scene.sensing["displacement_rmse_px"])
         coc = np.atleast_1d(scene.sensing["circle_of_confusion_px"])  # per view
@@ -121,17 +136,20 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
         final["circle_of_confusion_px_per_view"] = [float(c) for c in coc]
         if "shake_true_px" in scene.sensing:  # the vibration the chain put in, to score what was found
             final["shake_true_px"] = [[float(x) for x in s] for s in scene.sensing["shake_true_px"]]
-    final.update(measurement_report(scene))
+        if "occluded_true" in scene.sensing:  # the share of each view's ray grid the chain's burner hides
+            final["occluded_true"] = [float(x) for x in scene.sensing["occluded_true"]]
+    final.update(measurement_report(scene, solver.shakes_px()))
     if amb.temperature_known:
         final["temperature_note"] = ("temperature from n assuming an air-dominated gas of fixed composition "
                                      "(n - 1 = T0 (n0 - 1) / T)")
     return final
 
 
-def measurement_report(scene) -> dict:
+def measurement_report(scene, refined: Optional[torch.Tensor] = None) -> dict:
     """What the measurement stage found in every view, training and held out (``measurement``: camera name ->
     its figures), and the largest shake taken off any view (``shake_px_max``, px of the full sensor); empty for
-    data not measured from images."""
+    data not measured from images. ``refined``: (V, 2) the training views' shakes as the fit refined them [px of
+    the full sensor] (``shake_refined_px`` beside the measured ``shake_px``), or None."""
     per_view = {}
     for s in (scene, scene.heldout):
         if s is not None and s.measured:
@@ -139,6 +157,11 @@ def measurement_report(scene) -> dict:
                 per_view[cam.name] = {k: vals[v] for k, vals in s.measured.items()}
     if not per_view:
         return {}
+    if refined is not None:
+        for cam, shake in zip(scene.cameras, refined.tolist()):
+            per_view[cam.name]["shake_refined_px"] = [float(x) for x in shake]
+            log.info("%s: shake refined with the field to (%+.3f, %+.3f) px (measured (%+.3f, %+.3f))", cam.name,
+                     *shake, *per_view[cam.name]["shake_px"])
     shakes = [float(np.hypot(*f["shake_px"])) for f in per_view.values() if "shake_px" in f]
     return {"measurement": per_view, **({"shake_px_max": max(shakes)} if shakes else {})}
 
@@ -158,7 +181,9 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
         def psnr(k: str) -> str:
             return f"PSNR {m[k]:.1f} dB" if known(k) else "PSNR undefined (no deflection seen)"
 
-        held = [f"deflection RMSE {m['heldout_deflection_rmse']:.3g} {unit}, {psnr('heldout_psnr_db')}"]
+        held = [f"{100 * m['heldout_explained']:.0f} % of its displacements explained"] \
+            if known("heldout_explained") else []
+        held.append(f"deflection RMSE {m['heldout_deflection_rmse']:.3g} {unit}, {psnr('heldout_psnr_db')}")
         if known("heldout_displacement_rmse_px"):
             held.append(f"displacement RMSE {m['heldout_displacement_rmse_px']:.3g} px, "
                         f"{psnr('heldout_displacement_psnr_db')}")

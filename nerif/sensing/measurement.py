@@ -18,9 +18,9 @@ import numpy as np
 
 from nerif.registry import Registry
 from nerif.sensing.flame_light import without_flame_light
-from nerif.sensing.flow import FLOW, normalise_width
+from nerif.sensing.flow import estimate, texture_width
 from nerif.sensing.imaging import resample
-from nerif.sensing.occlusion import occluded
+from nerif.sensing.occlusion import local_contrast, occluded
 from nerif.sensing.saturation import saturated
 from nerif.sensing.shake import rigid_shift
 from nerif.sensing.vectors import median_test
@@ -40,9 +40,10 @@ class ViewMeasurement:
         valid: (h, w) bool: pixels with a usable measurement. Any other pixel is unknown: it carves no visual hull,
             counts as no ambient and enters no loss and no score.
         found: what was found (for ``metrics.json`` and the log): ``displacement_max_px``, ``valid_fraction``,
-            ``shake_px`` (column, row) [px of the full sensor], and the shares of the ray grid's pixels left out
+            ``shake_px`` (column, row) [px of the full sensor], the shares of the ray grid's pixels left out
             as ``saturated``, ``occluded`` (no texture in the reference), ``unmeasured`` (no estimate from the
-            flow) and ``rejected`` (outlier vectors).
+            flow) and ``rejected`` (outlier vectors), ``normalise_px`` (the flow's width) and
+            :func:`images_compared`'s ``difference_rms`` and ``texture_ratio``.
         distorted: (H, W) the distorted image the flow compared (the flame's light taken off where it was
             recorded), what an image term fits.
         flow: (H, W, 2) the flow itself on the images' grid [px of that grid], kept where asked for, else None.
@@ -60,10 +61,26 @@ def _on_grid(mask: np.ndarray, h: int, w: int) -> np.ndarray:
     return resample(mask.astype(np.float32), h, w) > 0
 
 
+def images_compared(distorted: np.ndarray, reference: np.ndarray, width_px: float) -> dict:
+    """What a view's two exposures (H, W) say of each other, for :mod:`nerif.data.view_check`: ``difference_rms``,
+    the RMS of their difference [share of full scale] (0: the same image), and ``texture_ratio``, the distorted
+    exposure's median local contrast (:func:`~nerif.sensing.occlusion.local_contrast` over the texture's width
+    ``width_px``) over the reference's (about 1: the same background; near 0: black, flat or overexposed)."""
+    d, r = np.float32(distorted), np.float32(reference)
+    ref = float(np.median(local_contrast(r, width_px)))
+    ratio = float(np.median(local_contrast(d, width_px))) / ref if ref > 0 else 1.0
+    return {"difference_rms": float(np.sqrt(np.mean((d - r) ** 2))), "texture_ratio": ratio}
+
+
+def _either(a: Optional[np.ndarray], b: Optional[np.ndarray]) -> Optional[np.ndarray]:
+    """Two optional masks' union (None where neither is given)."""
+    return b if a is None else a if b is None else a | np.asarray(b, dtype=bool)
+
+
 @MEASUREMENT.register("default")
 def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_px: tuple[int, int],
                  image_binning: int = 1, region: Optional[np.ndarray] = None, quiet: Optional[np.ndarray] = None,
-                 flame: Optional[np.ndarray] = None, name: str = "", keep_flow: bool = False, saturation: bool = True, occlusion_fraction: float = 0.25,
+                 flame: Optional[np.ndarray] = None, hidden: Optional[np.ndarray] = None, name: str = "", keep_flow: bool = False, saturation: bool = True, occlusion_fraction: float = 0.25,
                  shake: bool = True, median_threshold: Optional[float] = 2.0, median_eps_px: float = 0.1
                  ) -> ViewMeasurement:
     """Measure one view.
@@ -78,6 +95,8 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
             where the camera's shake is read; None: the bulk of the view.
         flame: (H, W) the view's exposure with the background off (the flame's own light), taken off ``distorted``
             (:func:`~nerif.sensing.flame_light.without_flame_light`) after the saturated pixels are found; None.
+        hidden: (H, W) bool: pixels known to be hidden (an occluder mask the capture gives), counted as occluded
+            with those the reference's texture shows; None.
         name: the view, for the log. keep_flow: keep the image-grid flow in the result.
         saturation: leave out pixels at the top of the range in either exposure (:mod:`~nerif.sensing.saturation`).
         occlusion_fraction: leave out pixels whose reference texture has less than this share of the view's background
@@ -88,16 +107,17 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     """
     h, w = grid_px
     valid = np.ones((h, w), bool) if region is None else np.asarray(region, dtype=bool).copy()
-    found = {}
-    width = normalise_width("auto", reference)  # the texture's own scale, measured once for both detectors
-    for what, hidden in (("saturated", saturated(distorted, reference, width_px=width) if saturation else None),
-                         ("occluded", occluded(reference, occlusion_fraction, width) if occlusion_fraction else None)):
-        lost = _on_grid(hidden, h, w) & valid if hidden is not None else np.zeros((h, w), bool)
+    width = texture_width(reference)  # the texture's own scale, measured once for every detector
+    found = images_compared(distorted, reference, width)
+    detected = occluded(reference, occlusion_fraction, width) if occlusion_fraction else None
+    for what, unreadable in (("saturated", saturated(distorted, reference, width_px=width) if saturation else None),
+                             ("occluded", _either(detected, hidden))):
+        lost = _on_grid(unreadable, h, w) & valid if unreadable is not None else np.zeros((h, w), bool)
         found[what] = float(lost.mean())
         valid &= ~lost
     if flame is not None:
         distorted = without_flame_light(distorted, flame)
-    u_image = FLOW.build(flow, distorted=distorted, reference=reference)
+    u_image, found["normalise_px"] = estimate(flow, distorted, reference, width)
     u = resample(u_image, h, w).astype(np.float32) * np.float32(image_binning)  # px of the full sensor
     unmeasured = valid & ~np.isfinite(u).all(-1)
     found["unmeasured"] = float(unmeasured.mean())
@@ -116,7 +136,8 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     found.update(displacement_max_px=peak, valid_fraction=float(valid.mean()))
     left = ", ".join(f"{100 * found[k]:.1f} % {k}" for k in ("saturated", "occluded", "unmeasured", "rejected")
                      if found[k] > 0)
-    log.info("%s: displacement up to %.2f px; shake (%+.3f, %+.3f) px taken off%s", name or "view", peak, s[0], s[1],
+    log.info("%s: displacement up to %.2f px; shake (%+.3f, %+.3f) px taken off%s%s", name or "view", peak, s[0], s[1],
+             f"; flow normalised over {found['normalise_px']:.1f} px" if found["normalise_px"] else "",
              f"; left out: {left}" if left else "")
     region_share = float(np.mean(region)) if region is not None else 1.0
     if region_share > 0 and found["valid_fraction"] < LOST_WARNING * region_share:

@@ -7,7 +7,7 @@ from typing import Optional
 import cv2
 import numpy as np
 
-from nerif.sensing.flow import normalise_width
+from nerif.sensing.flow import texture_width
 
 
 def local_contrast(image: np.ndarray, width_px: float) -> np.ndarray:
@@ -20,13 +20,13 @@ def local_contrast(image: np.ndarray, width_px: float) -> np.ndarray:
 
 def occluded(reference: np.ndarray, fraction: float = 0.25, width_px: Optional[float] = None) -> np.ndarray:
     """(H, W) bool: the pixels where ``reference`` (H, W) shows no texture: its :func:`local_contrast` over the
-    texture's own scale (the flow's normalisation width, :func:`nerif.sensing.flow.normalise_width`) below
+    texture's own scale (the flow's normalisation width, :func:`nerif.sensing.flow.texture_width`) below
     ``fraction`` of the background's contrast (the view's median, or half that of its best-textured tenth where
     most of the view is hidden), grown by 3 such widths (the contrast window and the flow's window
     reach that far across the occluder's edge). A speckle background keeps its contrast within a factor of two or so
     across the image (illumination falls off smoothly); a dark burner tube or mount has none. On the shared dirty capture's burner (5.4 % of each image):
     0.02 % of its pixels missed, none taken beside it. ``width_px``: the texture's width where the caller has it."""
-    width = width_px or normalise_width("auto", reference)
+    width = width_px or texture_width(reference)
     c = local_contrast(reference, width)
     # the background's contrast: the median, unless most of the view is hidden (then half its best-textured tenth's)
     level = max(float(np.median(c)), 0.5 * float(np.percentile(c, 90)))

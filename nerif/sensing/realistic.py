@@ -23,8 +23,10 @@ import torch
 
 from nerif.cache import cached_arrays
 from nerif.geometry import Camera, ProbeBox
-from nerif.renderers.voxel import line_integral, voxel_deflection
+from nerif.renderers.voxel import voxel_deflection
+from nerif.sensing.burner import DARK, burner_pixels
 from nerif.sensing.displacement import deflection_to_displacement, displacement_to_deflection
+from nerif.sensing.emission import flame_light
 from nerif.sensing.flow import FLOW
 from nerif.sensing.measurement import MEASUREMENT
 from nerif.sensing.imaging import add_noise, diffraction_blur, resample, to_uint8, warp
@@ -72,8 +74,8 @@ def true_displacements(delta: torch.Tensor, box: ProbeBox, render_camera: Camera
 
 
 def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_variance: float, gain_drift: float,
-              glow: Optional[np.ndarray], generator: torch.Generator, gain_ramp: float = 0.0
-              ) -> tuple[np.ndarray, np.ndarray]:
+              glow: Optional[np.ndarray], generator: torch.Generator, gain_ramp: float = 0.0,
+              hidden: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
     """The reference and the distorted exposure of one view.
 
     Args:
@@ -83,26 +85,35 @@ def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_v
             grows by this much more from the left edge to the right (an uneven illumination drift).
         glow: (H, W) the flame's own light on the distorted exposure, as a fraction of the background's mean
             brightness, or None.
-    Returns: (H, W) reference and distorted images (floats, noise drawn from ``generator``: reference first).
+        hidden: (H, W) bool, pixels that see an opaque occluder (:data:`nerif.sensing.burner.DARK`, no texture) in
+            both exposures, or None.
+    Returns: (H, W) reference and distorted images (floats, noise drawn from ``generator``: reference first), clipped
+    to [0, 1] as a sensor clips at its full scale.
     """
-    reference = add_noise(diffraction_blur(background, blur_px), noise_variance, generator).numpy()
+    reference = diffraction_blur(background, blur_px)
     gain = (1.0 + gain_drift) * (1.0 + gain_ramp * torch.linspace(0.0, 1.0, background.shape[1]))[None, :]
     distorted = diffraction_blur(warp(background, u), blur_px) * gain
+    if hidden is not None:
+        occluder = torch.as_tensor(hidden)
+        reference, distorted = (torch.where(occluder, DARK, x) for x in (reference, distorted))
     if glow is not None:
         distorted = distorted + float(background.mean()) * torch.as_tensor(glow)
-    return reference, add_noise(distorted, noise_variance, generator).numpy()
+    return tuple(np.clip(add_noise(x, noise_variance, generator).numpy(), 0.0, 1.0) for x in (reference, distorted))
 
 
 def check_settings(camera: Camera, rig_binning: int, pattern: dict, flow: dict, aperture_rays: int,
                    noise_variance: float, image_binning: int, render_binning: int, luminosity: float,
-                   gain_drift: float, gain_ramp: float = 0.0, shake_px: float = 0.0) -> None:
+                   gain_drift: float, gain_ramp: float = 0.0, shake_px: float = 0.0, burner_radius_mm: float = 0.0
+                   ) -> None:
     """One sentence for a setting of :func:`realistic` that cannot run (``camera``: a training camera)."""
     PATTERNS.get(pattern["name"]), FLOW.get(flow["name"])
     if noise_variance < 0:
         raise ValueError(f"noise variance must be >= 0, got {noise_variance}")
-    if not luminosity >= 0 or not gain_drift > -1 or not gain_ramp > -1 or not shake_px >= 0:
-        raise ValueError(f"data.sensor.luminosity={luminosity} and data.sensor.shake_px={shake_px} must be at least "
-                         f"0, data.sensor.gain_drift={gain_drift} and data.sensor.gain_ramp={gain_ramp} above -1")
+    if not luminosity >= 0 or not gain_drift > -1 or not gain_ramp > -1 or not shake_px >= 0 or \
+            not burner_radius_mm >= 0:
+        raise ValueError(f"data.sensor.luminosity={luminosity}, data.sensor.shake_px={shake_px} and "
+                         f"data.sensor.burner_radius_mm={burner_radius_mm} must be at least 0, "
+                         f"data.sensor.gain_drift={gain_drift} and data.sensor.gain_ramp={gain_ramp} above -1")
     aperture_points(aperture_rays, 1.0)
     for b, what in ((image_binning, "image_binning"), (render_binning, "render_binning")):
         if b < 1 or rig_binning % b and b % rig_binning:
@@ -115,8 +126,8 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
               view_start: torch.Tensor, step_mm: Optional[float], rig_binning: int, pattern: dict, flow: dict,
               aperture_rays: int = 60, wavelength_um: float = 0.5, noise_variance: float = 0.0,
               image_binning: int = 1, render_binning: Optional[int] = None, seed: int = 0, luminosity: float = 0.0,
-              gain_drift: float = 0.0, gain_ramp: float = 0.0, shake_px: float = 0.0, measure: Optional[dict] = None,
-              cache_dir=None):
+              gain_drift: float = 0.0, gain_ramp: float = 0.0, shake_px: float = 0.0, burner_radius_mm: float = 0.0,
+              burner_top_mm: Optional[float] = None, measure: Optional[dict] = None, cache_dir=None):
     """Observed deflections of the training rays through the realistic BOS chain.
 
     Args:
@@ -126,12 +137,16 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
             :data:`nerif.sensing.measurement.MEASUREMENT` entry (None: the default stage).
         noise_variance: variance of the additive Gaussian noise on each image (intensities in [0, 1]).
         luminosity: the flame's own light added to the distorted image, at its brightest this fraction of the
-            background's mean brightness, shaped like the flame's projection (the line integral of ``|delta|``
-            along each pixel's ray).
+            background's mean brightness, shaped like the flame's projection and seen out of focus
+            (:func:`nerif.sensing.emission.flame_light`: blurred by the circle of confusion at the probe). Where
+            light and background exceed the full scale, the image clips (saturates), as a sensor does.
         gain_drift: the distorted exposure's brightness over the reference's, less 1 (illumination drift):
             0.1 = 10 % brighter. gain_ramp: that gain grows by this much more across the image, left to right.
         shake_px: camera vibration between the exposures: each view's distorted image moved by a random shift,
             this RMS per axis [px of the full sensor], drawn with ``seed`` (the record's ``shake_true_px``).
+        burner_radius_mm, burner_top_mm: an opaque burner tube on the axis (:mod:`nerif.sensing.burner`), its top
+            at ``y = burner_top_mm`` (None: the probe box's bottom face); radius 0: none. The record's
+            ``occluded_true`` is the share of each view's ray grid it hides.
         step_mm: quadrature step of the aperture rays (default: one voxel of ``delta``; the aperture average
             is as accurate with it as with half a voxel, to 2e-5 on Phantom 5, at half the cost).
         cache_dir: where the aperture renderings (the costly part) are cached, keyed by the field and the
@@ -145,7 +160,8 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
     measure = dict(measure or {"name": "default"})
     MEASUREMENT.get(measure["name"])
     check_settings(cameras[0], rig_binning, pattern, flow, aperture_rays, noise_variance, image_binning, render_binning,
-                   luminosity, gain_drift, gain_ramp, shake_px)  # every check before the long work
+                   luminosity, gain_drift, gain_ramp, shake_px, burner_radius_mm)  # every check before the long work
+    top_mm = -0.5 * float(box.extent_mm[1]) if burner_top_mm is None else float(burner_top_mm)
     step_mm = step_mm or box.voxel_mm
     field_key = hashlib.sha256(delta.cpu().numpy().tobytes()).hexdigest()
     eps_obs = torch.empty(len(dirs), 3, dtype=torch.float32)
@@ -157,19 +173,20 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         H, W = img_cam.height, img_cam.width
         d_ren = ren_cam.pixel_directions(torch.float64).to(delta.device)
         u_ren = true_displacements(delta, box, ren_cam, img_cam, d_ren, aperture_rays, step_mm, cache_dir, field_key)
-        glow = None
-        if luminosity > 0:  # the flame's own light: the line integral of |delta| along each pixel's ray
-            glow = line_integral(delta.abs()[None], box, torch.as_tensor(ren_cam.position, dtype=delta.dtype,
-                                 device=delta.device).expand(len(d_ren), 3), d_ren.to(delta.dtype), step_mm)
-            glow = resample(glow.reshape(ren_cam.height, ren_cam.width).cpu().numpy().astype(np.float32), H, W)
-            glow = luminosity * glow / max(float(glow.max()), 1e-30)
         coc = circle_of_confusion(img_cam, wavelength_um)
+        glow = luminosity * flame_light(delta, box, img_cam, coc["d_mm"] / img_cam.pitch_mm, step_mm) \
+            if luminosity > 0 else None
+        tube = burner_pixels(img_cam, burner_radius_mm, top_mm) if burner_radius_mm > 0 else None
         background = torch.as_tensor(PATTERNS.build(pattern, height=H, width=W, seed=seed * 1009 + v))
         shake = np.random.default_rng(seed * 7919 + v).normal(0.0, shake_px, 2)  # px of the full sensor
         rec.setdefault("shake_true_px", []).append(shake)
         u_img = torch.as_tensor(resample(u_ren, H, W) + (shake / image_binning).astype(np.float32))
         reference, distorted = exposures(background, u_img, coc["d_diff_mm"] / img_cam.pitch_mm, noise_variance,
-                                         gain_drift, glow, torch.Generator().manual_seed(seed * 1009 + v), gain_ramp)
+                                         gain_drift, glow, torch.Generator().manual_seed(seed * 1009 + v), gain_ramp,
+                                         tube)
+        if tube is not None:  # the share of the ray grid's blocks that see some of the tube
+            blocks = resample(tube.astype(np.float32), cam.height, cam.width) > 0
+            rec.setdefault("occluded_true", []).append(np.float64(blocks.mean()))
         sl = slice(int(view_start[v]), int(view_start[v + 1]))
         pix = pixel[sl].cpu().numpy()
         quiet = np.ones(cam.height * cam.width, bool)

@@ -190,10 +190,16 @@ class IterativeSolver:
         self.train_seconds += dt
         self.step_times.append(dt)
 
-    def saturation(self, sigma: np.ndarray) -> dict:
+    def saturation(self, sigma: np.ndarray, failed: str = "") -> dict:
         """What a reconstruction ``sigma`` says about the solver's bounds, for ``metrics.json``: a bounded
-        solver reports the share of the flame at its bound, and ``warnings`` when that is sizeable. None here."""
+        solver reports the share of the flame at its bound, and ``warnings`` when that is sizeable (``failed``: the
+        held-out views' sentence where they say the fit failed). None here."""
         return {}
+
+    def shakes_px(self) -> Optional[torch.Tensor]:
+        """(V, 2) each training view's shake between the exposures [px of the full sensor] as the fit refined it,
+        or None where the solver refines none (the measurement stage's stand)."""
+        return None
 
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
         """Deflections of sigma (R, 3) of rays (R, 3) through the current reconstruction, in the unit of

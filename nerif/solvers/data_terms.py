@@ -58,9 +58,24 @@ class DeflectionTerm:
     def terms(self, eps: dict, batch: RayBatch, iteration: int) -> dict:
         return deflection_terms(eps, self.scene.observed[batch.index])
 
+    def parameter_groups(self) -> list[dict]:
+        """The term's own parameters, fitted with the field (optimiser groups); none here."""
+        return []
+
+    def shakes_px(self) -> Optional[torch.Tensor]:
+        """(V, 2) each training view's shake [px of the full sensor] as the fit refined it; None where the term
+        refines none."""
+        return None
+
+    def state_dict(self) -> dict:
+        return {}
+
+    def load_state_dict(self, st: dict) -> None:
+        pass
+
 
 @DATA_TERMS.register("images")
-class ImageTerm:
+class ImageTerm(DeflectionTerm):
     """The photometric residual ``I_ref(x + u(x)) - I_dist(x)`` at every image pixel of random patches of the ray
     grid: the field's deflections are rendered at the ``patch x patch`` rays of a patch, turned into displacements
     [image px] through the rig geometry, interpolated bilinearly inside each cell of 2 x 2 rays to its ``b x b``
@@ -81,12 +96,15 @@ class ImageTerm:
             It costs no rendering. The images fix the fine structure the flow's window blurs; the flow keeps the
             low-frequency level, which the image fit alone leaves off on the independent captures (why is not
             established: ``benchmarks/RESULTS.md``).
+        shake_lr: each view's shake between the exposures (the measurement stage's, :mod:`nerif.sensing.shake`) is
+            refined with the field at this learning rate [image px a step] (0: kept as measured): the images hold
+            the shake photometrically, where the flow's estimate carries its own bias (:meth:`shakes_px`).
     """
 
     fitted = "images"
 
     def __init__(self, flow_warmup: float = 0.25, highpass_px: Optional[float] = 8.0, interpolation: str = "bicubic",
-                 patch: int = 2, lowpass_px: Optional[float] = None, flow_weight: float = 1.0):
+                 patch: int = 2, lowpass_px: Optional[float] = None, flow_weight: float = 1.0, shake_lr: float = 0.0):
         if not 0.0 <= flow_warmup < 1.0:
             raise ValueError(f"data_term.flow_warmup={flow_warmup}: a share of the iterations within [0, 1)")
         if highpass_px is not None and not highpass_px >= 0:
@@ -98,7 +116,9 @@ class ImageTerm:
         self.flow_warmup, self.highpass_px, self.mode, self.k = float(flow_warmup), highpass_px, interpolation, patch
         if not flow_weight >= 0:
             raise ValueError(f"data_term.flow_weight={flow_weight}: a weight cannot be negative")
-        self.lowpass_px, self.flow_weight = lowpass_px, float(flow_weight)
+        if not shake_lr >= 0:
+            raise ValueError(f"data_term.shake_lr={shake_lr}: a learning rate [image px a step], 0 to keep the shakes")
+        self.lowpass_px, self.flow_weight, self.shake_lr = lowpass_px, float(flow_weight), float(shake_lr)
         self.flow = DeflectionTerm()
 
     def setup(self, scene: Scene, batches: RayBatcher, iterations: int, masks=None) -> "ImageTerm":
@@ -136,8 +156,9 @@ class ImageTerm:
         self.b, self.rows = b, H + 2 * MARGIN
         self.gain, self.scale = torch.cat(gain), torch.cat(scale)  # (N, 2, 3), (N,): per ray
         # each view's shake between the exposures, which the images hold and the field does not [image px]
-        self.shake = (scene.shake_px() / torch.tensor([[im.camera.binning] for im in scene.images], dtype=torch.float64,
-                                                      device=device)).float()
+        self.binning = torch.tensor([[im.camera.binning] for im in scene.images], dtype=torch.float64, device=device)
+        self.shake = (scene.shake_px() / self.binning).float()
+        self.shake_correction = torch.zeros_like(self.shake, requires_grad=self.shake_lr > 0)  # fitted with the field
         self.reference, self.distorted = torch.cat(refs), torch.cat(dists)  # (V (H + 2 MARGIN), W)
         self.weights, self.pixel_offsets = cell_weights(b, torch.float32, device)
         self.patch = patch
@@ -185,13 +206,38 @@ class ImageTerm:
         out = {}
         for name, e in eps.items():
             u = cells((A * e[:, None, :]).sum(-1))  # (C, 4, 2) [image px]
-            u = torch.einsum("pk,ckd->cpd", self.weights.to(u.dtype), u) + self.shake[views][:, None, :].to(u.dtype)
+            shake = (self.shake + self.shake_correction)[views][:, None, :]
+            u = torch.einsum("pk,ckd->cpd", self.weights.to(u.dtype), u) + shake.to(u.dtype)
             r = photometric_residual(self.reference, self.distorted, x, u.reshape(-1, 2), self.mode)
             out[name] = (r.reshape(len(top), -1).pow(2).mean(-1) / self.scale[top]).mean()
         if self.flow_weight > 0:
             flow = self.flow.terms(eps, batch, iteration)
             out = {name: out[name] + self.flow_weight * flow[name] for name in out}
         return out
+
+    def parameter_groups(self) -> list[dict]:
+        """The views' shake corrections [image px], at ``shake_lr``, without weight decay."""
+        if not self.refines:
+            return []
+        return [{"params": [self.shake_correction], "lr": self.shake_lr, "weight_decay": 0.0}]
+
+    @property
+    def refines(self) -> bool:
+        """Whether the shakes are refined: a rate is set and the images are fitted."""
+        return bool(self.shake_lr) and self.fitted == "images"
+
+    def shakes_px(self) -> Optional[torch.Tensor]:
+        if not self.refines:
+            return None
+        return ((self.shake + self.shake_correction.detach()).double() * self.binning).cpu()
+
+    def state_dict(self) -> dict:
+        return {"shake_correction": self.shake_correction.detach().clone()} if self.refines else {}
+
+    def load_state_dict(self, st: dict) -> None:
+        if self.refines and "shake_correction" in st:
+            with torch.no_grad():
+                self.shake_correction.copy_(st["shake_correction"])
 
 
 @DATA_TERMS.register("auto")

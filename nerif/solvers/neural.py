@@ -131,7 +131,7 @@ class NeuralSolver(IterativeSolver):
         enc = list(self.field.encoder.parameters())
         rest = [p for p in self.field.parameters() if all(p is not q for q in enc)]
         groups = [{"params": rest, "weight_decay": 0.0}] + ([{"params": enc, "weight_decay": self.table_decay}]
-                                                            if enc else [])
+                                                            if enc else []) + self.data_term.parameter_groups()
         self.optimizer = torch.optim.AdamW(groups, lr=oc["lr"], betas=tuple(oc["betas"]), eps=oc["eps"], fused=fused)
         self.scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(self.optimizer, T_max=self.iterations,
                                                                     eta_min=oc["lr_min"])
@@ -168,9 +168,10 @@ class NeuralSolver(IterativeSolver):
         log.info("warm start: the field fits %s to %.3g (RMS sigma) after %d iterations", path, rms,
                  self.init_iterations)
 
-    def saturation(self, sigma: np.ndarray) -> dict:
-        """:func:`nerif.field.prior_saturation` of ``sigma`` within this field's prior."""
-        return prior_saturation(sigma, self.interval, self.scene.ambient, self.scene.truth_T)
+    def saturation(self, sigma: np.ndarray, failed: str = "") -> dict:
+        """:func:`nerif.field.prior_saturation` of ``sigma`` within this field's prior (``failed``: the held-out
+        views' sentence where they say the fit failed)."""
+        return prior_saturation(sigma, self.interval, self.scene.ambient, self.scene.truth_T, failed)
 
     # --- batches ---
     def _measured(self, d: torch.Tensor) -> Optional[torch.Tensor]:
@@ -223,6 +224,10 @@ class NeuralSolver(IterativeSolver):
                    samples_per_ray=len(samples.positions) / max(samples.n_rays, 1),
                    rays_skipped=stats[-1] / max(samples.n_rays, 1))
         return out
+
+    def shakes_px(self) -> Optional[torch.Tensor]:
+        """The shakes the image term refined with the field (``data_term.shake_lr``), else None."""
+        return self.data_term.shakes_px()
 
     def occupancy_value(self, positions: torch.Tensor) -> torch.Tensor:
         """(N, 3) [mm] -> (N,) |sigma| of the trained field: what the occupancy grid thresholds."""
@@ -300,7 +305,8 @@ class NeuralSolver(IterativeSolver):
                 "average": None if self.average is None else self.average.state_dict(),
                 "sampler": self.sampler.state_dict(), "scheduler": self.scheduler.state_dict(),
                 "generator": self.generator.get_state(), "samples_seen": self.samples_seen, "rays_seen": self.rays_seen,
-                "samples_max": self.samples_max, "rays_skipped": self.rays_skipped, "converged": self.converged}
+                "samples_max": self.samples_max, "rays_skipped": self.rays_skipped, "converged": self.converged,
+                "data_term": self.data_term.state_dict()}
 
     def _load_field(self, st: dict, weights: Optional[dict] = None) -> None:
         try:
@@ -330,6 +336,7 @@ class NeuralSolver(IterativeSolver):
 
     def load_state_dict(self, st: dict) -> None:
         self._load_field(st)
+        self.data_term.load_state_dict(st.get("data_term", {}))
         try:
             self.optimizer.load_state_dict(st["optimizer"])
         except ValueError as e:
