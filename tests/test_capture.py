@@ -127,6 +127,21 @@ def _read(path):
      "rig.yaml is not valid YAML \\(line 3\\)"),
     (lambda r: r["camera"].update(focal_mm="abc"), None, ValueError, "camera.focal_mm = 'abc' must be a positive"),
     (lambda r: r.update(occluders=["mask.png"]), None, ValueError, "occluders must list one mask image per view \\(7"),
+    # issue 38: the rig file against its schema, each message naming the key
+    (lambda r: r.update(held_out=[3]), None, ValueError, "unknown key 'held_out' .*did you mean 'heldout'"),
+    (lambda r: r.update(Tmax=2500), None, ValueError, "unknown key 'Tmax' .*did you mean 'T_max'"),
+    (lambda r: r["camera"].update(pitch_mm=0.02), None, ValueError, "unknown key 'camera.pitch_mm' .*'camera.pitch_um'"),
+    (lambda r: r.update(calibration="c.yml"), None, ValueError, "unknown key 'calibration' for a version-2 rig file: the keys are"),
+    (lambda r: r["ambient"].update(T0=23.0), None, ValueError, "ambient.T0 = 23.0 is not a temperature in kelvin"),
+    (lambda r: r["ambient"].update(n0=1.27), None, ValueError, "ambient.n0 = 1.27 must be a gas's refractive index"),
+    (lambda r: r.update(roi_px=[0, 0, 240]), None, ValueError, "roi_px \\(x, y, width, height\\) = \\[0, 0, 240\\] must "
+     "be 4 whole numbers"),
+    (lambda r: r.update(heldout=6), None, ValueError, "heldout = 6 must be a list of whole numbers"),
+    (lambda r: r["views"].update(angles_deg="0 27.5 55 82.5 110 137.5 165"), None, ValueError,
+     "views.angles_deg = '0 27.5 .*' must be a list of numbers"),
+    (lambda r: r["probe"].update(shape="16x16x16"), None, ValueError, "probe.shape = '16x16x16' must be 3 whole numbers"),
+    (lambda r: r.update(T_max="2000 K"), None, ValueError, "T_max = '2000 K' must be a positive number"),
+    (lambda r: r.update(temperature_range_K=300), None, ValueError, "temperature_range_K 300 must be two increasing"),
     (lambda r: r.update(occluders=["mask.png"] + [None] * 6), None, FileNotFoundError,
      "view 0's occluder mask 'mask.png', which does not exist"),
 ])

@@ -3,6 +3,7 @@ one camera model on an arc, a time series, OpenCV-calibrated cameras; every key 
 ``docs/captures.md``)."""
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -19,6 +20,14 @@ RIG_VERSION = 2  # what the writer of a steady or time-resolved arc capture writ
 READ_VERSIONS = (1, 2, 3)
 FORMAT_DOC = "docs/captures.md"
 ARC_KEYS = ("focal_mm", "pitch_um", "f_number", "camera_to_centre_mm", "camera_to_background_mm")
+# every key a rig file may hold, by version and by block: another key is a slip (a misspelling, another format's)
+COMMON_KEYS = ("format", "version", "roi_px", "probe", "ambient", "T_max", "temperature_range_K", "heldout",
+               "flame_only", "occluders")
+TOP_KEYS = {1: COMMON_KEYS + ("camera", "views"), 2: COMMON_KEYS + ("camera", "views", "frames"),
+            3: COMMON_KEYS + ("calibration", "cameras", "f_number")}
+BLOCK_KEYS = {"camera": ARC_KEYS + ("sensor_px",), "views": ("angles_deg", "images", "references"),
+              "probe": ("shape", "voxel_mm"), "ambient": ("T0", "n0")}
+MIN_AMBIENT_K = 150.0  # an ambient temperature below this is not in kelvin (a room in Celsius reads 20-25)
 
 
 @dataclass(frozen=True)
@@ -111,6 +120,37 @@ def _optional(rig: dict, key: str, default):
     return default if value is None else value
 
 
+def _known_keys(path: Path, rig: dict) -> None:
+    """One sentence for a key the rig file's version does not know, with the nearest known key."""
+    blocks = [("", rig, TOP_KEYS[rig["version"]])] + [(f"{b}.", rig[b], keys) for b, keys in BLOCK_KEYS.items()
+                                                     if isinstance(rig.get(b), dict)]
+    for prefix, block, keys in blocks:
+        for key in block:
+            if key not in keys:
+                near = difflib.get_close_matches(str(key), keys, n=1, cutoff=0.5)
+                hint = f"did you mean '{prefix}{near[0]}'?" if near else f"the keys are {', '.join(keys)}"
+                raise ValueError(f"{path}: unknown key '{prefix}{key}' for a version-{rig['version']} rig file: {hint} "
+                                 f"(see {FORMAT_DOC})")
+
+
+def _integers(v, n: Optional[int], what: str) -> tuple[int, ...]:
+    """A list of ``n`` whole numbers (any length where None), or one sentence naming ``what``."""
+    ok = isinstance(v, list) and (n is None or len(v) == n) and all(
+        not isinstance(x, bool) and isinstance(x, (int, float)) and float(x).is_integer() for x in v)
+    if not ok:
+        size = f"{n} whole numbers" if n is not None else "a list of whole numbers"
+        raise ValueError(f"{what} = {v!r} must be {size}")
+    return tuple(int(x) for x in v)
+
+
+def _numbers(v, what: str) -> tuple[float, ...]:
+    """A non-empty list of finite numbers, or one sentence naming ``what``."""
+    if not isinstance(v, list) or not v or any(isinstance(x, bool) or not isinstance(x, (int, float))
+                                               or not np.isfinite(x) for x in v):
+        raise ValueError(f"{what} = {v!r} must be a list of numbers (one per view)")
+    return tuple(float(x) for x in v)
+
+
 def _positive(v, what: str) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not (np.isfinite(v) and v > 0):
         raise ValueError(f"{what} = {v!r} must be a positive number")
@@ -137,6 +177,7 @@ def read_rig(root: Path) -> RigFile:
     lens, calibrated = None, None
     if rig["version"] == 3:
         calibrated = _calibrated_cameras(path, rig)
+        _known_keys(path, rig)
         w, h = calibrated[0].camera.width, calibrated[0].camera.height
         angles = [round(float(np.degrees(np.arctan2(c.position[0], c.position[2]))), 6) for c in calibrated]
         views = {"angles_deg": angles, "images": [c.image for c in calibrated],
@@ -144,22 +185,36 @@ def read_rig(root: Path) -> RigFile:
         calibrated = tuple(c.camera for c in calibrated)
         roi = _optional(rig, "roi_px", [0, 0, w, h])
     else:
+        _known_keys(path, rig)
         lens, (w, h) = _arc_lens(path, rig)
         views = _need(rig, "views", str(path))
         angles = _need(views, "angles_deg", f"{path} views")
         roi = _need(rig, "roi_px", str(path))
     refs = _need(views, "references", f"{path} views")
+    angles = _numbers(angles, f"{path}: views.angles_deg")
     frames = _frames(rig, views, len(angles), path)
     if isinstance(refs, list) and len(refs) != len(angles):
         raise ValueError(f"{path}: views.references lists {len(refs)} files for {len(angles)} views; give one "
                          "per view or a single shared file")
     refs = refs if isinstance(refs, list) else [refs] * len(angles)
     probe, amb = _need(rig, "probe", str(path)), _need(rig, "ambient", str(path))
-    box = ProbeBox(tuple(int(n) for n in _need(probe, "shape", f"{path} probe")),
-                   float(_need(probe, "voxel_mm", f"{path} probe")))
-    ambient = Ambient(float(_need(amb, "T0", f"{path} ambient")), float(_need(amb, "n0", f"{path} ambient")),
-                      float(_optional(rig, "T_max", 2000.0)))
+    shape = _integers(_need(probe, "shape", f"{path} probe"), 3, f"{path}: probe.shape")
+    if min(shape) < 1:
+        raise ValueError(f"{path}: probe.shape = {list(shape)} must be three positive voxel counts")
+    box = ProbeBox(shape, _positive(_need(probe, "voxel_mm", f"{path} probe"), f"{path}: probe.voxel_mm"))
+    t0 = _positive(_need(amb, "T0", f"{path} ambient"), f"{path}: ambient.T0")
+    if t0 < MIN_AMBIENT_K:
+        raise ValueError(f"{path}: ambient.T0 = {amb['T0']} is not a temperature in kelvin (room temperature is "
+                         f"about 293-300 K; {amb['T0']} degC is {t0 + 273.15:g} K)")
+    n0 = _positive(_need(amb, "n0", f"{path} ambient"), f"{path}: ambient.n0")
+    if not 1.0 < n0 < 1.01:
+        raise ValueError(f"{path}: ambient.n0 = {amb['n0']} must be a gas's refractive index, just above 1 (air: "
+                         "1.00027)")
+    ambient = Ambient(t0, n0, _positive(_optional(rig, "T_max", 2000.0), f"{path}: T_max"))
+    roi = _integers(roi, 4, f"{path}: roi_px (x, y, width, height)")
     held = rig.get("heldout")
+    if held is not None:
+        held = _integers(held, None, f"{path}: heldout")
     flame = rig.get("flame_only")
     if flame is not None and (not isinstance(flame, list) or len(flame) != len(angles)):
         raise ValueError(f"{path}: flame_only must list one image per view ({len(angles)}), each the view's exposure "
@@ -171,12 +226,12 @@ def read_rig(root: Path) -> RigFile:
                          "none), nonzero where something hides the background")
     t_range = rig.get("temperature_range_K")
     if t_range is not None:
-        lo, hi = (float(t) for t in t_range)
+        lo, hi = _numbers(t_range, f"{path}: temperature_range_K") if isinstance(t_range, list) and \
+            len(t_range) == 2 else (0.0, 0.0)
         if not 0 < lo < hi:
             raise ValueError(f"{path}: temperature_range_K {t_range} must be two increasing positive temperatures [K]")
-    return RigFile(path, int(rig["version"]), (int(w), int(h)), tuple(float(a) for a in angles),
-                   tuple(str(r) for r in refs), frames, tuple(int(v) for v in roi), box, ambient,
-                   tuple(int(v) for v in held) if held is not None else None,
+    return RigFile(path, int(rig["version"]), (int(w), int(h)), angles,
+                   tuple(str(r) for r in refs), frames, roi, box, ambient, held,
                    (lo, hi) if t_range is not None else None, lens, calibrated,
                    (path,) + ((path.parent / str(rig["calibration"]),) if "calibration" in rig else ()),
                    tuple(str(f) for f in flame) if flame is not None else None,
@@ -196,7 +251,7 @@ def _arc_lens(path: Path, rig: dict) -> tuple[ArcLens, tuple[int, int]]:
         raise ValueError(f"{path}: camera.camera_to_background_mm = {cam['camera_to_background_mm']} must exceed "
                          f"camera.camera_to_centre_mm = {cam['camera_to_centre_mm']} (the background lies behind the "
                          "probe)")
-    w, h = (int(x) for x in cam["sensor_px"])
+    w, h = _integers(cam["sensor_px"], 2, f"{path}: camera.sensor_px (width, height)")
     return ArcLens(**values), (w, h)
 
 
