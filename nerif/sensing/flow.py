@@ -84,7 +84,10 @@ def estimate(flow: dict, distorted: np.ndarray, reference: np.ndarray, texture_p
     wide = AUTO_WIDTH_RANGE_PX[1]
     u = FLOW.build({**flow, "normalise_px": wide}, distorted=distorted, reference=reference)
     width = texture_px or texture_width(reference)
-    if light_structure(distorted, warped(reference, u), width) <= LIGHT_SEEN:
+    seen = warped(reference, u)
+    unknown = ~np.isfinite(u).all(-1)
+    seen[unknown] = np.float32(distorted)[unknown]  # where the flow gave no estimate, no light is read
+    if light_structure(distorted, seen, width) <= LIGHT_SEEN:
         return u, wide
     narrow = FLOW.build({**flow, "normalise_px": width}, distorted=distorted, reference=reference)
     if misfit(distorted, reference, narrow, width) < misfit(distorted, reference, u, width):

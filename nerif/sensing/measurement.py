@@ -61,13 +61,15 @@ def _on_grid(mask: np.ndarray, h: int, w: int) -> np.ndarray:
     return resample(mask.astype(np.float32), h, w) > 0
 
 
-def images_compared(distorted: np.ndarray, reference: np.ndarray, width_px: float) -> dict:
+def images_compared(distorted: np.ndarray, reference: np.ndarray, width_px: float,
+                    contrast: Optional[np.ndarray] = None) -> dict:
     """What a view's two exposures (H, W) say of each other, for :mod:`nerif.data.view_check`: ``difference_rms``,
     the RMS of their difference [share of full scale] (0: the same image), and ``texture_ratio``, the distorted
     exposure's median local contrast (:func:`~nerif.sensing.occlusion.local_contrast` over the texture's width
-    ``width_px``) over the reference's (about 1: the same background; near 0: black, flat or overexposed)."""
+    ``width_px``) over the reference's (about 1: the same background; near 0: black, flat or overexposed);
+    ``contrast``: the reference's local contrast where the caller has it."""
     d, r = np.float32(distorted), np.float32(reference)
-    ref = float(np.median(local_contrast(r, width_px)))
+    ref = float(np.median(local_contrast(r, width_px) if contrast is None else contrast))
     ratio = float(np.median(local_contrast(d, width_px))) / ref if ref > 0 else 1.0
     return {"difference_rms": float(np.sqrt(np.mean((d - r) ** 2))), "texture_ratio": ratio}
 
@@ -108,8 +110,9 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     h, w = grid_px
     valid = np.ones((h, w), bool) if region is None else np.asarray(region, dtype=bool).copy()
     width = texture_width(reference)  # the texture's own scale, measured once for every detector
-    found = images_compared(distorted, reference, width)
-    detected = occluded(reference, occlusion_fraction, width) if occlusion_fraction else None
+    contrast = local_contrast(reference, width)  # the reference's texture, read by two steps
+    found = images_compared(distorted, reference, width, contrast)
+    detected = occluded(reference, occlusion_fraction, width, contrast) if occlusion_fraction else None
     for what, unreadable in (("saturated", saturated(distorted, reference, width_px=width) if saturation else None),
                              ("occluded", _either(detected, hidden))):
         lost = _on_grid(unreadable, h, w) & valid if unreadable is not None else np.zeros((h, w), bool)

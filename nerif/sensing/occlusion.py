@@ -18,16 +18,18 @@ def local_contrast(image: np.ndarray, width_px: float) -> np.ndarray:
     return np.sqrt(cv2.GaussianBlur(detail * detail, (0, 0), float(width_px)))
 
 
-def occluded(reference: np.ndarray, fraction: float = 0.25, width_px: Optional[float] = None) -> np.ndarray:
+def occluded(reference: np.ndarray, fraction: float = 0.25, width_px: Optional[float] = None,
+             contrast: Optional[np.ndarray] = None) -> np.ndarray:
     """(H, W) bool: the pixels where ``reference`` (H, W) shows no texture: its :func:`local_contrast` over the
     texture's own scale (the flow's normalisation width, :func:`nerif.sensing.flow.texture_width`) below
     ``fraction`` of the background's contrast (the view's median, or half that of its best-textured tenth where
     most of the view is hidden), grown by 3 such widths (the contrast window and the flow's window
     reach that far across the occluder's edge). A speckle background keeps its contrast within a factor of two or so
     across the image (illumination falls off smoothly); a dark burner tube or mount has none. On the shared dirty capture's burner (5.4 % of each image):
-    0.02 % of its pixels missed, none taken beside it. ``width_px``: the texture's width where the caller has it."""
+    0.02 % of its pixels missed, none taken beside it. ``width_px``: the texture's width, and ``contrast`` (H, W)
+    the reference's :func:`local_contrast` over it, where the caller has them."""
     width = width_px or texture_width(reference)
-    c = local_contrast(reference, width)
+    c = local_contrast(reference, width) if contrast is None else contrast
     # the background's contrast: the median, unless most of the view is hidden (then half its best-textured tenth's)
     level = max(float(np.median(c)), 0.5 * float(np.percentile(c, 90)))
     if not level > 0:
