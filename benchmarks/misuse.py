@@ -115,6 +115,23 @@ def fixtures(work: Path) -> dict:
         for path, img in zip((d, r), edit(dist, ref)):
             cv2.imwrite(str(path), img)
 
+    def every_image(name: str, edit) -> None:  # issue 38: every image of the capture edited alike
+        import cv2
+
+        fx[name] = capture_variant(name)
+        for f in sorted(fx[name].glob("*.png")):
+            cv2.imwrite(str(f), edit(cv2.imread(str(f), cv2.IMREAD_UNCHANGED)))
+
+    every_image("gain_clipped", lambda img: np.clip(img.astype(np.float32) * 2, 0, 255).astype(img.dtype))
+    fx["no_flame"] = capture_variant("no_flame")  # every distorted image taken without the flame
+    for f in sorted(fx["no_flame"].glob("reference_*.png")):
+        shutil.copyfile(f, f.with_name(f.name.replace("reference", "distorted")))
+    for name, edit in (("sensor_swapped", lambda r: r["camera"].update(sensor_px=r["camera"]["sensor_px"][::-1])),
+                       ("focal_metres", lambda r: r["camera"].update(focal_mm=r["camera"]["focal_mm"] / 1e3)),
+                       ("pitch_nm", lambda r: r["camera"].update(pitch_um=r["camera"]["pitch_um"] * 1e3)),
+                       ("probe_huge", lambda r: r["probe"].update(shape=[600, 1000, 600])),
+                       ("probe_small", lambda r: r["probe"].update(shape=[6, 16, 6]))):
+        fx[name] = capture_variant(name, edit)
     one_view("view_black", lambda dist, ref: (np.zeros_like(dist), ref))
     one_view("view_saturated", lambda dist, ref: (np.full_like(dist, 255), ref))
     one_view("view_copy", lambda dist, ref: (ref, ref))
@@ -243,6 +260,32 @@ def cases(work: Path, fx: dict) -> list[Case]:
         Case("ctrl_c_while_rendering", nerif("device=cpu", "data.cache_dir=null", "data.render_supersample=6",
                                              out("ctrlc")), "refuse", "interrupted before training",
              interrupt_after=8.0),
+        # issue 38: the capture path's classes of slips, each failing first
+        Case("heldout_a_number", nerif(*cap(fx["capture"], "data.heldout=3"), out("held3")), "refuse",
+             "data.heldout=3 must be a list of view indices"),
+        Case("binning_as_float", nerif(*cap(fx["capture"], "data.binning=8.0"), out("bin8f")), "warn", "nerif:"),
+        Case("binning_coarse", nerif(*cap(fx["capture"], "data.binning=40"), out("bin40")), "warn",
+             "data.binning=40: a ray spans"),
+        Case("flow_winsize_zero", nerif(*cap(fx["capture"], "flow.winsize=0"), out("win0")), "refuse",
+             "flow=farneback with flow.winsize=0 cannot measure"),
+        Case("sensor_px_swapped", nerif(*cap(fx["sensor_swapped"]), out("swaphw")), "refuse", "swap its two numbers"),
+        Case("focal_in_metres", nerif(*cap(fx["focal_metres"]), out("focalm")), "refuse", "a focal length in metres"),
+        Case("pitch_in_nanometres", nerif(*cap(fx["pitch_nm"]), out("pitchnm")), "refuse", "a pitch in nanometres"),
+        Case("probe_grid_a_zero_too_many", nerif(*cap(fx["probe_huge"]), out("huge")), "refuse", "lower probe.shape"),
+        Case("probe_smaller_than_flame", nerif(*cap(fx["probe_small"]), out("small")), "warn",
+             "see the flame outside the probe box's image"),
+        Case("gain_clipped", nerif(*cap(fx["gain_clipped"]), out("gain2")), "warn", "(clipped)"),
+        Case("no_flame_in_any_view", nerif(*cap(fx["no_flame"]), out("noflame")), "refuse",
+             "its distorted image equals its reference"),
+        Case("run_into_its_capture", nerif(*cap(fx["capture"]), f"hydra.run.dir={fx['capture']}"), "refuse",
+             "inside the capture folder", [fx["capture"] / "rig.yaml"]),
+        Case("path_needs_quotes", nerif(*TINY, f"hydra.run.dir={work / 'runs' / 'a (b)'}"), "refuse",
+             "quote it for Hydra"),
+        Case("hash_levels_zero", nerif(*TINY, "field.hash_levels=0", out("lev0")), "refuse", "field.hash_levels=0"),
+        Case("threshold_a_word", nerif(*TINY, "mask.threshold=abc", out("thrabc")), "refuse",
+             "mask.threshold=abc: a number"),
+        Case("write_capture_overwrite_first", ["nerif.write_capture", str(work / "wc_first"), "--overwrite", *CAPTURE],
+             "warn", "written to"),
         Case("corrupt_cache_entry", nerif(*TINY, f"data.cache_dir={fx['cache']}", "train.iterations=2", out("cache")),
              "warn", "is damaged"),
     ]

@@ -1,16 +1,20 @@
 """``python -m nerif [overrides]``: one reconstruction, or a multirun with ``-m``."""
 import logging
 import os
+import shlex
 import signal
 import sys
 from pathlib import Path
+from typing import Optional
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import OverrideParseException
 from omegaconf import DictConfig
 
 from nerif.app import run
-from nerif.configs import config_dir
+from nerif.configs import check_kinds, config_dir
 from nerif.io.export import write_json
 from nerif.io.summary import FAILED
 from nerif.solvers import DivergenceError, Interrupted
@@ -27,8 +31,12 @@ def parallel_jobs() -> int:
 
 
 def check_overrides(cfg: DictConfig, overrides) -> None:
-    """One sentence for a command-line setting the run ignores: the synthetic rig's (``rig.*``) with recorded
-    data, whose cameras come from the data's own files."""
+    """One sentence for a command-line setting of the wrong kind (:func:`nerif.configs.check_kinds`, against the
+    config of the same config-group choices), or one the run ignores: the synthetic rig's (``rig.*``) with
+    recorded data, whose cameras come from the data's own files."""
+    groups = {p.name for p in config_dir().iterdir() if p.is_dir()}
+    choices = [o for o in overrides if o.lstrip("+~").split("=")[0] in groups]
+    check_kinds(cfg, hydra.compose(config_name="config", overrides=choices), overrides)
     if cfg.data.name == "synthetic":
         return
     ignored = [o for o in overrides if o.lstrip("+~").startswith("rig.")]
@@ -38,18 +46,49 @@ def check_overrides(cfg: DictConfig, overrides) -> None:
                          f"cameras from its own files{binning}")
 
 
+def unreadable_override(args: list[str]) -> Optional[str]:
+    """One sentence for the first command-line override whose value Hydra's grammar cannot read as written (a path
+    with a space, a bracket, an accent, ``=``, ``~`` or an apostrophe), with the quoted form it reads; None."""
+    parser = OverridesParser.create()
+    for arg in args:
+        if arg.startswith("-") or "=" not in arg:
+            continue
+        try:
+            parser.parse_overrides([arg])
+        except OverrideParseException:
+            key, value = arg.split("=", 1)
+            quoted = shlex.quote(key + '="' + value.replace("\\", "\\\\").replace('"', '\\"') + '"')
+            return (f"{arg}: Hydra cannot read this value as written (a space, a bracket, an accent, '=', '~' or a "
+                    f"quote in it); quote it for Hydra, inside the shell's quotes: {quoted}")
+    return None
+
+
+def unexpected(e: BaseException) -> str:
+    """One sentence for an exception nerif did not turn into one where it arose (OpenCV's, torch's, a TypeError
+    from a value of the wrong kind): its type and first line, and how to see where it arose."""
+    said = getattr(e, "err", None) or str(e)  # cv2.error: its short message
+    first = next((ln.strip() for ln in str(said).splitlines() if ln.strip()), "")
+    return (f"nerif stopped on {type(e).__name__}: {first or 'no message'}; the settings and files named above are "
+            "the place to look (add debug=true to see the traceback)")
+
+
+def stop(message: str) -> float:
+    """Log ``message`` as the run's one sentence and end it: a multirun's job is listed as failed and the sweep
+    goes on; a single run exits with status 2."""
+    logging.getLogger("nerif").error("%s", message)
+    if HydraConfig.get().mode.name == "MULTIRUN":  # the sweep goes on; its summary lists the job as failed
+        write_json({"error": message}, Path(HydraConfig.get().runtime.output_dir) / FAILED)
+        return float("nan")
+    sys.exit(2)
+
+
 @hydra.main(version_base=None, config_path=str(config_dir()), config_name="config")
 def main(cfg: DictConfig) -> float:
     try:
         check_overrides(cfg, HydraConfig.get().overrides.task)
         metrics = run(cfg, HydraConfig.get().runtime.output_dir, parallel_jobs())
     except (ValueError, FileNotFoundError, DivergenceError) as e:  # bad input or a diverged run: one sentence
-        message = str(e.args[0] if len(e.args) == 1 else e)  # an OSError's own: "[Errno 2] ...: 'path'"
-        logging.getLogger("nerif").error("%s", message)
-        if HydraConfig.get().mode.name == "MULTIRUN":  # the sweep goes on; its summary lists the job as failed
-            write_json({"error": message}, Path(HydraConfig.get().runtime.output_dir) / FAILED)
-            return float("nan")
-        sys.exit(2)
+        return stop(str(e.args[0] if len(e.args) == 1 else e))  # an OSError's own: "[Errno 2] ...: 'path'"
     except Interrupted as e:  # the loop saved a checkpoint and said so in one line
         number = getattr(signal, e.signal_name)
         launcher_handler = signal.getsignal(number)
@@ -59,8 +98,22 @@ def main(cfg: DictConfig) -> float:
     except KeyboardInterrupt:  # Ctrl-C before training (the flow, the rendering): nothing was made to keep
         logging.getLogger("nerif").error("interrupted before training began: nothing to save")
         sys.exit(130)
+    except Exception as e:  # anything else is one sentence too; the traceback with debug=true
+        if cfg.get("debug"):
+            raise
+        return stop(unexpected(e))
     return metrics.get("temperature_rmse_K", metrics["deflection_rmse"])
 
 
-if __name__ == "__main__":
+def cli() -> None:
+    """``python -m nerif``: an override Hydra cannot read is one sentence (Hydra's own is its grammar's), then the
+    run."""
+    message = unreadable_override(sys.argv[1:])
+    if message:
+        print(f"nerif: {message}", file=sys.stderr)
+        sys.exit(2)
     main()
+
+
+if __name__ == "__main__":
+    cli()

@@ -13,9 +13,10 @@ import torch
 from omegaconf import DictConfig
 
 from nerif.configs import check_complete, group
+from nerif.data.capture import probe_voxels
 from nerif.io.folders import check_writable, run_folder
 from nerif.memory import check_memory
-from nerif.reconstruct import reconstruct, resuming
+from nerif.reconstruct import WarningRecords, reconstruct, resuming
 from nerif.sequence import frames_of, run_sequence
 from nerif.solvers.base import check_train
 from nerif.threads import ThreadTuner, resolve_threads, usable_cores
@@ -60,6 +61,17 @@ def retain_freed_memory() -> bool:
     return ok
 
 
+def check_outside_capture(cfg: DictConfig, out_dir: Path) -> None:
+    """One sentence where the run would write into the capture folder it reads: its images (``slices.png``, ...)
+    would then be read as unlisted views by the next run."""
+    if cfg.data.name != "capture" or cfg.data.root in (None, "???"):
+        return
+    root, out = Path(str(cfg.data.root)).expanduser().resolve(), Path(out_dir).resolve()
+    if out == root or root in out.parents:
+        raise ValueError(f"hydra.run.dir={out_dir} is inside the capture folder data.root={cfg.data.root}: its images "
+                         "would be read as views by the next run; write the run elsewhere")
+
+
 def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     """Reconstruct the configured scene into ``out_dir``, or every frame of a time series (``data.frames``;
     :func:`nerif.sequence.run_sequence`); returns the final metrics. ``parallel_jobs``: jobs of a multirun
@@ -70,18 +82,20 @@ def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     check_complete(cfg)
     check_train(group(cfg, "train"), cfg.seed)
     device = resolve_device(cfg.device)
-    check_memory(cfg, device)
-    threads = resolve_threads(cfg.threads, parallel_jobs)
+    check_memory(cfg, device, probe=probe_voxels(cfg.data.root) if cfg.data.name == "capture" else None)
+    with WarningRecords() as early:  # what the log warns of before the data is read goes to metrics.json too
+        threads = resolve_threads(cfg.threads, parallel_jobs)
     torch.set_num_threads(threads)
     tuner = None
     if cfg.threads == "auto" and parallel_jobs <= 1 and device.type == "cpu":
         tuner = ThreadTuner(usable_cores(), torch.set_num_threads)
         tuner.start(threads)
     retain_freed_memory()
+    check_outside_capture(cfg, out_dir)
     check_writable(out_dir)
     continuing = cfg.train.resume is not None or resuming(cfg.train.resume)
     with run_folder(out_dir, continuing):
         frames = frames_of(group(cfg, "data"))  # a time series is checked whole here, before any work
         if frames is not None:
-            return run_sequence(cfg, out_dir, device, frames, threads=tuner)
-        return reconstruct(cfg, out_dir, device, t_start=t_start, threads=tuner)
+            return run_sequence(cfg, out_dir, device, frames, threads=tuner, warned=tuple(early.messages))
+        return reconstruct(cfg, out_dir, device, t_start=t_start, threads=tuner, about={"warnings": early.messages})

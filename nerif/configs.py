@@ -7,9 +7,9 @@ them from any folder; a source checkout or an editable install reads the reposit
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Optional, Sequence
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -85,3 +85,40 @@ def check_complete(cfg: DictConfig) -> None:
     if missing:
         raise ValueError(f"{', '.join(missing)} must be set: give {'it' if len(missing) == 1 else 'them'} on the "
                          f"command line, e.g. {missing[0]}=...")
+
+
+WORDS = ("auto", "all")  # words a numeric setting may take instead (threads=auto, train.views_per_batch=all)
+
+
+def _kind(default, value) -> Optional[str]:
+    """What ``value`` must be, as its setting's ``default`` shows (a number, true or false, a list), where it is
+    not; None where it is, or where the default shows no kind (null, a word)."""
+    def number(x) -> bool:
+        return not isinstance(x, bool) and isinstance(x, (int, float))
+
+    if isinstance(default, bool):
+        return None if isinstance(value, bool) else "true or false"
+    if number(default):
+        return None if number(value) or value is None or value in WORDS else "a number"
+    if isinstance(default, list):
+        if not isinstance(value, list):
+            return "a list"
+        if default and all(number(x) for x in default) and not all(number(x) for x in value):
+            return "a list of numbers"
+    return None
+
+
+def check_kinds(cfg: DictConfig, defaults: DictConfig, overrides: Sequence[str]) -> None:
+    """One sentence for a command-line setting (``key=value`` of ``overrides``) whose value in ``cfg`` is not of
+    the kind of its value in ``defaults`` (the config of the same config-group choices without the settings): a
+    word where a number goes (``rig.n_cameras=abc``), a number where a list goes (``field.hidden=64``). A setting
+    whose default is null or a word is left to the component that reads it."""
+    for key in dict.fromkeys(o.lstrip("+~").partition("=")[0] for o in overrides if "=" in o):
+        if key.startswith("hydra") or OmegaConf.select(defaults, key, default=None) is None:
+            continue
+        default = OmegaConf.select(defaults, key)
+        value = OmegaConf.select(cfg, key)
+        plain = [OmegaConf.to_container(x) if isinstance(x, (DictConfig, ListConfig)) else x for x in (default, value)]
+        need = _kind(*plain)
+        if need:
+            raise ValueError(f"{key}={plain[1]}: {need} (its default: {plain[0]})")

@@ -18,6 +18,8 @@ from omegaconf import DictConfig
 log = logging.getLogger(__name__)
 GIB = 2.0**30
 FLOAT = 4  # bytes of a float32
+PER_VOXEL = 96  # bytes a voxel of the probe grid takes over a run (the hull, the masks, the outputs): 95 measured
+                # between 80^3 and 160^3 voxels on a capture
 
 
 def available_bytes(device: torch.device) -> float:
@@ -46,14 +48,18 @@ def _phantom_voxels(phantom: DictConfig) -> Optional[float]:
     return None
 
 
-def estimates(cfg: DictConfig) -> list[tuple[str, str, float]]:
-    """(what, the key that sets it, bytes) of a run's largest allocations."""
+def estimates(cfg: DictConfig, probe: Optional[tuple[float, str]] = None) -> list[tuple[str, str, float]]:
+    """(what, the key that sets it, bytes) of a run's largest allocations. ``probe``: the voxels of the probe grid
+    and the key that sets it, where the data read it from a file (a capture's rig file), else None."""
     out = []
     if cfg.data.name == "synthetic":
         voxels = _phantom_voxels(cfg.phantom)
         if voxels is not None:  # the phantom and its deflection field on the supersampled grid, float64
             ss = float(cfg.data.render_supersample)
             out.append(("the phantom on the rendering grid", "data.render_supersample", voxels * ss**3 * 8 * 4))
+            probe = probe or (voxels, "phantom.shape")
+    if probe is not None:
+        out.append(("the probe grid's volumes", probe[1], probe[0] * PER_VOXEL))
     if cfg.solver.name != "nerif":
         return out
     field, train = cfg.field, cfg.train
@@ -75,10 +81,11 @@ def estimates(cfg: DictConfig) -> list[tuple[str, str, float]]:
     return out
 
 
-def check_memory(cfg: DictConfig, device: torch.device, share: float = 0.8) -> None:
+def check_memory(cfg: DictConfig, device: torch.device, share: float = 0.8,
+                 probe: Optional[tuple[float, str]] = None) -> None:
     """One sentence, before any work, when the run's estimated allocations exceed ``share`` of the free memory of
-    ``device``, naming the largest and the key that sets it."""
-    parts = estimates(cfg)
+    ``device``, naming the largest and the key that sets it (``probe``: as :func:`estimates` takes it)."""
+    parts = estimates(cfg, probe)
     need = sum(b for _, _, b in parts)
     free = available_bytes(device)
     if need <= share * free:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+import warnings
 from pathlib import Path
 from typing import Optional
 
@@ -20,6 +21,7 @@ from nerif.masks import MASKS
 from nerif.solvers import SOLVERS
 
 log = logging.getLogger(__name__)
+_PACKAGE = Path(__file__).resolve().parent  # nerif's own code, whose Python warnings a run records
 
 
 def resuming(setting) -> bool:
@@ -38,21 +40,31 @@ def checkpoint_to_resume(setting, own: Path) -> Optional[Path]:
 
 
 class WarningRecords(logging.Handler):
-    """Every warning nerif logs while installed (on the ``nerif`` logger), for ``metrics.json`` and the summary
-    line: what the log says, a run's results say too."""
+    """Every warning nerif logs while installed (on the ``nerif`` logger), and every Python warning nerif's own code
+    raises (``warnings.warn``, logged on it), for ``metrics.json`` and the summary line: what the log says, a run's
+    results say too."""
 
     def __init__(self):
         super().__init__(logging.WARNING)
         self.messages: list[str] = []
+        self._show = None
 
     def emit(self, record: logging.LogRecord) -> None:
         self.messages.append(record.getMessage())
 
+    def _show_warning(self, message, category, filename, lineno, file=None, line=None) -> None:
+        if Path(filename).resolve().is_relative_to(_PACKAGE):
+            logging.getLogger("nerif").warning("%s", message)
+        else:
+            self._show(message, category, filename, lineno, file, line)
+
     def __enter__(self) -> "WarningRecords":
         logging.getLogger("nerif").addHandler(self)
+        self._show, warnings.showwarning = warnings.showwarning, self._show_warning
         return self
 
     def __exit__(self, *exc) -> None:
+        warnings.showwarning = self._show
         logging.getLogger("nerif").removeHandler(self)
 
 
@@ -61,7 +73,8 @@ def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Opt
                 resume_hint: Optional[str] = None, threads=None) -> dict:
     """One reconstruction (of ``frame`` of a time series, or of the steady scene) into ``out_dir``: build the
     parts, train (from the state of ``start_from``, a checkpoint of the previous frame, unless the run resumes
-    its own), write every output (``about``: entries added to its ``metrics.json``). Returns the final metrics.
+    its own), write every output (``about``: entries added to its ``metrics.json``; its ``warnings``, those given
+    before, lead the run's). Returns the final metrics.
     ``resume_hint``: how to continue after an interruption (default: from this run's checkpoint). ``threads``: a
     :class:`nerif.threads.ThreadTuner` that times the training steps to keep the fastest CPU thread count."""
     with WarningRecords() as records:
@@ -125,14 +138,16 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
 
     try:
         metrics = write_outputs(solver, scene, out_dir, losses)
-        metrics["warnings"] = list(dict.fromkeys(rig_warnings + metrics.get("warnings", []) + records.messages))
+        about = dict(about or {})
+        earlier = about.pop("warnings", [])
+        metrics["warnings"] = list(dict.fromkeys(earlier + rig_warnings + metrics.get("warnings", []) + records.messages))
         metrics.update(setup_time_s=setup_s, cpu_threads=torch.get_num_threads(),
                        device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
         metrics.update(threads.report() if threads is not None else {})
         if device.type == "cuda":
             metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
         metrics["total_time_s"] = time.perf_counter() - t_start
-        metrics.update(about or {})
+        metrics.update(about)
         write_json(metrics, out_dir / "metrics.json")
     except OSError as e:  # a full disk: one sentence saying what is there
         saved = sorted(p.name for p in out_dir.iterdir() if not p.name.startswith("."))

@@ -77,10 +77,12 @@ def check_sequence(cfg: DictConfig) -> None:
                          "train.resume=auto hydra.run.dir=<the series' folder>")
 
 
-def run_sequence(cfg: DictConfig, out_dir: Path, device: torch.device, frames: list[Frame], threads=None) -> dict:
+def run_sequence(cfg: DictConfig, out_dir: Path, device: torch.device, frames: list[Frame], threads=None,
+                 warned: tuple = ()) -> dict:
     """Reconstruct ``frames`` in turn into ``out_dir/frame_KKKK/``, each from the previous frame's final state
     (``sequence.warm_start``); write the series' outputs (also when interrupted, for the finished frames).
-    Returns the series' metrics. ``threads``: the run's :class:`nerif.threads.ThreadTuner`, if any."""
+    Returns the series' metrics. ``threads``: the run's :class:`nerif.threads.ThreadTuner`, if any. ``warned``:
+    the warnings the run gave before its frames, which each frame's ``metrics.json`` carries too."""
     t_start = time.perf_counter()
     check_sequence(cfg)
     again = resuming(cfg.train.resume)
@@ -104,7 +106,7 @@ def run_sequence(cfg: DictConfig, out_dir: Path, device: torch.device, frames: l
                 log.info("frame %d (%d of %d, t = %.4g s): %s", f.index, j + 1, len(frames), f.time_s, how)
                 m = reconstruct(frame_config(cfg, warm), folder, device, frame=f.index,
                                 start_from=previous if warm else None,
-                                about={"frame": f.index, "time_s": f.time_s, "warm_start": warm},
+                                about={"frame": f.index, "time_s": f.time_s, "warm_start": warm, "warnings": list(warned)},
                                 resume_hint=f"the same command and train.resume=auto hydra.run.dir={out_dir}",
                                 threads=threads)
             rows.append({**{k: m.get(k) for k in FINAL_KEYS}, "frame": f.index, "time_s": f.time_s,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import shutil
 import sys
 from pathlib import Path
@@ -134,23 +135,51 @@ def write_calibrated(scene: Scene, root: Path, images: list[str], heldout: Optio
     return root
 
 
-def target_folder(path: Path, overwrite: bool) -> None:
-    """One sentence when ``path`` cannot take a new capture: a file, or a folder with something in it (unless
-    ``overwrite``: then it is replaced whole, once the new capture is complete)."""
+def target_folder(path: Path, overwrite: bool) -> Path:
+    """The folder to write a new capture to (a link followed to its target, where the capture is written, so that the
+    link stays), checked before anything is rendered; one sentence when it cannot take one: a file, a folder with
+    something in it (unless ``overwrite``: then it is replaced whole, once the new capture is complete), the
+    folder the command runs in or one holding it, or a place that cannot be written."""
+    path = Path(os.path.realpath(Path(path).expanduser()))
     if path.exists() and not path.is_dir():
         raise ValueError(f"{path} is a file: give the folder to write the capture to")
     if path.is_dir() and any(path.iterdir()) and not overwrite:
         raise ValueError(f"{path} is not empty: choose a new folder, or add --overwrite to replace it whole")
+    here = Path.cwd().resolve()
+    if path.exists() and (path == here or path in here.parents):
+        raise ValueError(f"{path} is the folder this command runs in (or holds it): replacing it would remove the "
+                         "folder you are in; give another folder")
+    parent = path.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{parent} cannot be written: give a folder where you may write")
+    return path
+
+
+def check_space(folder: Path, cfg) -> None:
+    """One sentence, before rendering, where the disk holding ``folder`` lacks the room for the capture's images
+    (their raw size, 8-bit: PNG compresses noisy speckle little)."""
+    rig, frames = cfg.rig, frames_of(group(cfg, "data"))
+    images = int(rig.n_cameras) * (1 + (len(frames) if frames is not None else 1))
+    need = images * int(rig.width_px) * int(rig.height_px)
+    free = shutil.disk_usage(folder).free
+    if need > free:
+        raise ValueError(f"the capture's {images} images need about {need / 2**20:.0f} MiB, more than the "
+                         f"{free / 2**20:.0f} MiB free on the disk of {folder}: free some space or write it elsewhere")
 
 
 def write(path: Path, overrides: list[str], overwrite: bool = False) -> Path:
     """Render the scene of ``overrides`` and write it as a capture to ``path``, atomically: into a sibling
     folder first, which then takes the place of ``path`` (an interrupted write leaves ``path`` as it was)."""
-    target_folder(path, overwrite)
+    path = target_folder(path, overwrite)
     cfg = compose(["data=synthetic", "data.sensing=realistic"] + list(overrides))
     check_complete(cfg)
     data = group(cfg, "data")
     frames = frames_of(data)
+    parent = path.parent
+    parent.mkdir(parents=True, exist_ok=True)
+    check_space(parent, cfg)
     staging = path.parent / f".{path.name}.writing"
     shutil.rmtree(staging, ignore_errors=True)
     try:
@@ -181,12 +210,15 @@ def main(argv=None) -> Path:
     ap.add_argument("path", help="the capture folder to write (created; it must be new or empty)")
     ap.add_argument("overrides", nargs="*", help="config overrides of the synthetic scene (data.sensing is realistic)")
     ap.add_argument("--overwrite", action="store_true", help="replace a folder that holds something, whole")
-    args = ap.parse_args(argv)
+    args = ap.parse_intermixed_args(argv)  # --overwrite anywhere on the line
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     try:
         root = write(Path(args.path), args.overrides, args.overwrite)
     except (ValueError, FileNotFoundError, OSError, HydraException) as e:  # one sentence, as python -m nerif
-        message = str(e.args[0] if e.args else e).splitlines()[0]
+        if isinstance(e, OSError) and e.strerror:  # its words and file, not its number
+            message = f"{e.filename + ': ' if e.filename else ''}{e.strerror}"
+        else:
+            message = str(e.args[0] if e.args else e).splitlines()[0]
         print(f"nerif.write_capture: error: {message}", file=sys.stderr, flush=True)
         sys.exit(2)
     except KeyboardInterrupt:

@@ -2,6 +2,7 @@
 import csv
 import json
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -130,8 +131,12 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("phantom.T_peak=1000000", "beyond what the field can represent with data.T_max=2000 K (up to 2808 K"),
     ("+train.iteration=5", "train.iteration: not a setting nerif knows (did you mean train.iterations?)"),  # issue 28
     ("+seeds=3", "seeds: not a setting nerif knows (did you mean seed?)"),
-    ("train.iterations=abc", "train.iterations='abc': a whole number of at least 1"),
-    ("seed=abc", "seed='abc': a whole number"),
+    ("train.iterations=abc", "train.iterations=abc: a number (its default: 1200)"),  # issue 38: by kind
+    ("seed=abc", "seed=abc: a number (its default: 0)"),
+    ("field.hidden=64", "field.hidden=64: a list (its default: [64, 64])"),
+    ("mask.threshold=abc", "mask.threshold=abc: a number (its default: 0.001)"),
+    ("train.progress=yes", "train.progress=yes: true or false"),
+    ("field.hash_levels=0", "field.hash_levels=0 must be a whole number of at least 1"),  # it crashed the kernel
     ("train.lr=0", "train.lr=0: the peak learning rate, a positive number"),
     ("train.betas=[1.5,0.9]", "train.betas=[1.5, 0.9]: Adam's two decay rates, each within [0, 1)"),
     ("train.lr_min=1", "train.lr_min=1: the learning rate's floor, within [0, train.lr = 0.005]"),
@@ -281,14 +286,60 @@ def test_help_says_what_nerif_does_and_lists_the_groups():
     assert r.stdout.count("python -m nerif") >= 3
 
 
-def test_a_bug_keeps_its_traceback(tmp_path):
-    """Only the errors raised for bad input become one sentence; a KeyError from a bug is shown in full."""
-    code = ("import sys, nerif.__main__ as m\n"
-            "def broken(*args):\n    return {}['missing']\n"
-            f"m.run = broken\nsys.argv = ['nerif', 'device=cpu', 'hydra.run.dir={tmp_path}']\nm.main()\n")
-    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+def test_a_bug_is_one_sentence_and_its_traceback_is_there_with_debug(tmp_path):
+    """Issue 38: any exception becomes one sentence naming it (OpenCV's, torch's and a TypeError from a value of
+    the wrong kind reached the user raw); ``debug=true`` shows the traceback."""
+    def call(*extra):
+        code = ("import sys, nerif.__main__ as m\n"
+                "def broken(*args):\n    return {}['missing']\n"
+                f"m.run = broken\nsys.argv = ['nerif', 'device=cpu', 'hydra.run.dir={tmp_path}', *{list(extra)!r}]\n"
+                "m.main()\n")
+        return subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+
+    r = call()
+    assert r.returncode == 2 and "Traceback" not in r.stderr + r.stdout
+    assert "nerif stopped on KeyError: 'missing'" in r.stdout + r.stderr and "debug=true" in r.stdout + r.stderr
+    r = call("debug=true")
     assert r.returncode != 0
     assert "Traceback" in r.stderr and "KeyError: 'missing'" in r.stderr and "in broken" in r.stderr
+
+
+def test_an_override_hydra_cannot_read_is_one_sentence_with_its_quoted_form():
+    """Issue 38: a path with a space, a bracket, an accent, '=', '~' or an apostrophe got Hydra's lexer error."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    from nerif.__main__ import unreadable_override
+
+    assert unreadable_override(["data=capture", "data.root=/tmp/x", "-m", "train.lr=1e-3"]) is None
+    for path in ("/tmp/a (b)", "/tmp/é", "~/x", "/tmp/it's", "/a=b"):
+        said = unreadable_override(["data=capture", f"data.root={path}"])
+        assert said.startswith(f"data.root={path}: Hydra cannot read this value as written")
+        quoted = shlex.split(said.rsplit(": ", 1)[1])[0]  # what the shell hands Hydra
+        assert OverridesParser.create().parse_overrides([quoted])[0].value() == path
+
+
+def test_a_run_is_not_written_into_the_capture_it_reads(tmp_path):
+    from nerif.app import check_outside_capture
+    from nerif.configs import compose
+
+    cfg = compose(["data=capture", f"data.root={tmp_path}"])
+    check_outside_capture(cfg, tmp_path.parent / "run")
+    for inside in (tmp_path, tmp_path / "run"):
+        with pytest.raises(ValueError, match=f"hydra.run.dir={inside} is inside the capture folder"):
+            check_outside_capture(cfg, inside)
+
+
+def test_python_warnings_of_nerif_reach_the_runs_warnings_and_others_do_not():
+    """Issue 38: every warning the log shows is in metrics.json; an empty 2-D mask was a Python warning only."""
+    import warnings
+
+    from nerif.masks import backprojection
+    from nerif.reconstruct import WarningRecords
+
+    with pytest.warns(UserWarning, match="another library"), WarningRecords() as records:  # shown as before
+        warnings.warn_explicit("a view's 2-D mask is empty", UserWarning, backprojection.__file__, 1)
+        warnings.warn_explicit("something of another library", UserWarning, "/elsewhere/lib.py", 1)
+    assert records.messages == ["a view's 2-D mask is empty"]
 
 
 @pytest.mark.skipif(sys.platform != "linux" or os.confstr("CS_GNU_LIBC_VERSION") is None, reason="glibc only")
@@ -363,10 +414,15 @@ def test_a_full_disk_loses_no_result_that_fits_and_is_one_sentence(tmp_path, mon
     def full(self, path):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(IterativeSolver, "save", full)
+    def torch_full(obj, f, *a, **k):  # what torch.save raises on a full disk (issue 38: it lost the run)
+        raise RuntimeError("[enforce fail at inline_container.cc:603] . PytorchStreamWriter failed writing file "
+                           "data/0: file write failed")
+
+    monkeypatch.setattr("torch.save", torch_full)
     m = run(tiny_config("train.iterations=4"), tmp_path / "a")
     assert m["iterations"] == 4 and (tmp_path / "a" / "reconstruction.npz").is_file()
     assert not (tmp_path / "a" / "checkpoint.pt").exists()
+    monkeypatch.setattr(IterativeSolver, "save", full)
     monkeypatch.setattr("nerif.reconstruct.write_json", lambda *a, **k: full(None, None))
     with pytest.raises(ValueError, match="writing the results to .*b failed \\(No space left on device\\); it holds "
                                          ".*reconstruction.npz"):

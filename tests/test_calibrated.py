@@ -168,7 +168,16 @@ def test_a_cameras_list_in_the_rig_file_is_the_calibration_file(tmp_path):
     a, b = rig_cameras(read_rig(listed), 4)[1], rig_cameras(read_rig(folder(tmp_path / "file")), 4)[1]
     for x, y in zip(a, b):
         assert np.array_equal(x.pixel_directions().numpy(), y.pixel_directions().numpy())
-    cameras[4]["dist_coeffs"] = [0.1, "x"]
-    (listed / RIG_FILE).write_text(yaml.safe_dump({**rig, "cameras": cameras}))
-    with pytest.raises(ValueError, match=r"rig.yaml: cameras\[4\]: 'dist_coeffs' must be"):
-        read_rig(listed)
+    for edit, message in [  # issue 38: values against what cameras and lenses have
+        (lambda c: c.update(dist_coeffs=[0.1, "x"]), r"'dist_coeffs' must be"),
+        (lambda c: c.update(rvec=np.rad2deg(c["rvec"]).tolist()), r"'rvec' turns by .*more than pi: .*in degrees\?"),
+        (lambda c: c.update(dist_coeffs=[50.0, 0, 0, 0, 0]), r"'dist_coeffs' .* move the image's corner by \d+ %"),
+        (lambda c: c.update(pixel_pitch_mm=40.0), r"'pixel_pitch_mm' x 1000 \[um\] = 40000 is outside what cameras "
+                                                  r"have .*a pitch in nanometres"),
+        (lambda c: c.update(background_distance_mm=1.6), r"'background_distance_mm' = 1.6 .*a distance in metres"),
+    ]:
+        bad = [dict(c) for c in cameras]
+        edit(bad[4])
+        (listed / RIG_FILE).write_text(yaml.safe_dump({**rig, "cameras": bad}))
+        with pytest.raises(ValueError, match=r"rig.yaml: cameras\[4\]: " + message):
+            read_rig(listed)

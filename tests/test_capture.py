@@ -122,7 +122,7 @@ def _read(path):
     (lambda r: r["camera"].update(camera_to_background_mm=500), None, ValueError,
      "camera.camera_to_background_mm = 500 must exceed camera.camera_to_centre_mm"),
     (lambda r: r["camera"].update(focal_mm=-105), None, ValueError, "camera.focal_mm = -105 must be a positive number"),
-    (lambda r: r["camera"].update(pitch_um=0.02), None, ValueError, "camera.pitch_um = 0.02 is in micrometres"),
+    (lambda r: r["camera"].update(pitch_um=0.02), None, ValueError, "camera.pitch_um = 0.02 is outside what cameras have .*0.02 mm is 20 um"),
     (None, lambda d: (d / "rig.yaml").write_text("format: nerif-capture\nversion: [1\n"), ValueError,
      "rig.yaml is not valid YAML \\(line 3\\)"),
     (lambda r: r["camera"].update(focal_mm="abc"), None, ValueError, "camera.focal_mm = 'abc' must be a positive"),
@@ -133,6 +133,16 @@ def _read(path):
     (lambda r: r["camera"].update(pitch_mm=0.02), None, ValueError, "unknown key 'camera.pitch_mm' .*'camera.pitch_um'"),
     (lambda r: r.update(calibration="c.yml"), None, ValueError, "unknown key 'calibration' for a version-2 rig file: the keys are"),
     (lambda r: r["ambient"].update(T0=23.0), None, ValueError, "ambient.T0 = 23.0 is not a temperature in kelvin"),
+    (lambda r: r["camera"].update(sensor_px=r["camera"]["sensor_px"][::-1]), None, ValueError,
+     "distorted_00.png is 240 x 320 px but the rig's sensor_px .* is 320 x 240: sensor_px is \\(width, height\\), swap"),
+    (None, lambda d: [_write(p, _read(p)[::2, ::2]) for p in d.glob("*.png")], ValueError,
+     "is 120 x 160 px .*binned 2 x 2 in the camera\\? Then give the images' size as sensor_px"),
+    (lambda r: r["camera"].update(focal_mm=0.105), None, ValueError,
+     "camera.focal_mm = 0.105 is outside what cameras have .*a focal length in metres\\? 0.105 m is 105 mm"),
+    (lambda r: r["camera"].update(camera_to_centre_mm=0.8, camera_to_background_mm=1.6), None, ValueError,
+     "camera.camera_to_centre_mm = 0.8 .*a distance in metres"),
+    (lambda r: r.update(heldout=3), None, ValueError, "heldout = 3 must be a list of whole numbers"),
+    (lambda r: r["camera"].update(f_number=3200), None, ValueError, "camera.f_number = 3200 is outside what cameras have"),
     (lambda r: r["ambient"].update(n0=1.27), None, ValueError, "ambient.n0 = 1.27 must be a gas's refractive index"),
     (lambda r: r.update(roi_px=[0, 0, 240]), None, ValueError, "roi_px \\(x, y, width, height\\) = \\[0, 0, 240\\] must "
      "be 4 whole numbers"),
@@ -267,6 +277,7 @@ def _drop_last(rig):
     (lambda r: r["frames"][2].update(time_s=0.01), None, "frame 2 has time_s 0.01, not after frame 1's"),
     (lambda r: r["views"].update(images=r["frames"][0]["images"]), None, "either as views.images .* not both"),
     (lambda r: r["frames"][1].pop("time_s"), None, "frame 1 lacks 'time_s'"),
+    (lambda r: r["frames"][1].update(time_s="abc"), None, "frame 1's time_s = 'abc' must be a number of seconds"),
 ])
 def test_bad_series_folders_are_one_sentence_before_any_flow(series, tmp_path, monkeypatch, edit_rig, edit_files,
                                                               message):
@@ -323,6 +334,8 @@ def test_a_patch_without_estimates_is_unknown_and_carves_no_flame(written, monke
 
     def holed(cfg, **images):
         u = build(cfg, **images)
+        if images["reference"].shape != (320, 240):  # the flow's check of its settings on a test pair
+            return u
         calls.append(images["reference"])
         if calls[-1] is calls[0]:  # the first view (each flow of it): rows 120-200, columns 80-160 of its 240 x 320
             u[120:200, 80:160] = np.nan  # image, the flame's centre

@@ -47,3 +47,20 @@ def test_local_normalisation_is_blind_to_a_gain_and_a_smooth_added_light():
     assert diff.mean() < 0.01 * np.abs(normalised(image, 8.0) - 0.5)[inner].mean() + 1e-3, diff.mean()
     assert normalised(image, None) is image
 
+
+
+def test_flow_settings_that_cannot_measure_are_one_sentence_before_any_image():
+    """Issue 38: ``flow.winsize=0`` left every view empty, and the run blamed the region of interest; a DIS patch of
+    0 px crashed the process (a floating-point exception in OpenCV). :func:`check_flow` measures a known shift with
+    the settings first; the defaults find it."""
+    from nerif.sensing.flow import check_flow
+
+    check_flow({"name": "farneback"})
+    check_flow({"name": "dis"})
+    with pytest.raises(ValueError, match=r"flow=farneback with flow.winsize=0 cannot measure a known shift of "
+                                         r"\(0.6, -0.4\) px on a test texture \(no estimate\)"):
+        check_flow({"name": "farneback", "winsize": 0})
+    with pytest.raises(ValueError, match=r"flow=farneback cannot run with flow.pyr_scale=1.5: OpenCV says"):
+        check_flow({"name": "farneback", "pyr_scale": 1.5})
+    with pytest.raises(ValueError, match=r"flow.patch_size=0 must be a whole number, at least 2"):
+        check_flow({"name": "dis", "patch_size": 0})

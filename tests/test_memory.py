@@ -36,3 +36,26 @@ def test_a_run_that_cannot_fit_is_refused_naming_the_key(monkeypatch, override, 
     with pytest.raises(ValueError, match=f"GiB free on cpu: {key}$"):
         check_memory(compose([override]), torch.device("cpu"))
 
+
+
+def test_a_captures_probe_grid_is_read_from_its_rig_file(tmp_path, monkeypatch):
+    """Issue 38: a probe grid of [600, 1000, 600] in rig.yaml (a zero too many) took 8 GiB in 23 s: the estimate did
+    not read the rig's grid. It reads it now, and the refusal names the key and the file."""
+    import yaml
+
+    from nerif.data.capture import probe_voxels
+
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump({
+        "format": "nerif-capture", "version": 1, "roi_px": [0, 0, 64, 64],
+        "camera": {"focal_mm": 105.0, "pitch_um": 20.0, "sensor_px": [64, 64], "f_number": 32.0,
+                   "camera_to_centre_mm": 800.0, "camera_to_background_mm": 1600.0},
+        "views": {"angles_deg": [0, 60, 120], "references": "r.png", "images": ["a.png", "b.png", "c.png"]},
+        "probe": {"shape": [600, 1000, 600], "voxel_mm": 0.1}, "ambient": {"T0": 296.0, "n0": 1.00027}}))
+    voxels, key = probe_voxels(str(tmp_path))
+    assert voxels == 600 * 1000 * 600 and key == f"probe.shape in {tmp_path / 'rig.yaml'}"
+    cfg = compose(["data=capture", f"data.root={tmp_path}"])
+    grid = [b for what, _, b in estimates(cfg, (voxels, key)) if what == "the probe grid's volumes"]
+    assert grid == [pytest.approx(3.6e8 * 96)]
+    monkeypatch.setattr("nerif.memory.available_bytes", lambda device: 16 * 2.0**30)
+    with pytest.raises(ValueError, match=f"lower probe.shape in {tmp_path / 'rig.yaml'}$"):
+        check_memory(cfg, torch.device("cpu"), probe=(voxels, key))

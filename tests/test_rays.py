@@ -66,3 +66,20 @@ def test_a_sensor_no_block_fits_is_said_to_be_binned_far_from_a_voxel(caplog):
     fits = arc_rig(angles_deg=[0.0, 60.0], distance_mm=800.0, focal_mm=105.0, width_px=360, height_px=640,
                    pitch_um=40.0, background_behind_mm=800.0, f_number=32.0, binning=1)
     assert resolve_binning("auto", fits, ProbeBox((10, 10, 10), 1.0), "the sensor") == 4 and "WARNING" not in caplog.text
+
+
+def test_rays_coarser_than_the_probe_grid_are_said_and_a_whole_float_is_a_binning(caplog):
+    """Issue 38: ``data.binning=40`` (9 x 16 rays a view) gave 4.1x the error without a word, and ``4.0`` was
+    refused. A voxel spans 3.5 pixels here: 8 x 8 pixels a ray (2.3 voxels) pass, 10 x 10 (2.8) are said."""
+    from nerif.data.folders import resolve_binning
+
+    cams = arc_rig(angles_deg=[0.0, 60.0], distance_mm=800.0, focal_mm=105.0, width_px=360, height_px=640,
+                   pitch_um=40.0, background_behind_mm=800.0, f_number=32.0, binning=1)
+    box = ProbeBox((10, 10, 10), 1.0)
+    assert resolve_binning(4.0, cams, box, "the sensor") == 4
+    assert resolve_binning(8, cams, box, "the sensor") == 8 and "WARNING" not in caplog.text
+    assert resolve_binning(10, cams, box, "the sensor") == 10
+    assert "data.binning=10: a ray spans 2.8 voxels of the probe grid across (36 x 64 rays a view)" in caplog.text
+    assert "(auto: 4)" in caplog.text
+    with pytest.raises(ValueError, match="data.binning=4.5: auto or a whole number"):
+        resolve_binning(4.5, cams, box, "the sensor")

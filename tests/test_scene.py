@@ -112,3 +112,16 @@ def test_distinct_view_directions():
     assert view_directions(arc_rig(n_cameras=12)) == 12
     assert view_directions(arc_rig(angles_deg=[30.0, 30.0, 30.0])) == 1  # three views at one angle
     assert view_directions(arc_rig(angles_deg=[0.0, 180.0, 90.0, 90.5])) == 2  # opposite and near views are one
+
+
+def test_held_out_views_given_as_a_number_are_one_sentence_naming_the_setting():
+    """Issue 38: ``data.heldout=8`` (a number where a list goes) was a TypeError traceback."""
+    from nerif.data.scene import heldout_views
+
+    assert heldout_views([3.0, 1], 5, "data.heldout") == [1, 3]
+    with pytest.raises(ValueError, match=r"data.heldout=3 must be a list of view indices, such as \[3\]"):
+        heldout_views(3, 5, "data.heldout")
+    with pytest.raises(ValueError, match=r"data.heldout=\['a'\] must be a list of view indices"):
+        heldout_views(["a"], 5, "data.heldout")
+    with pytest.raises(ValueError, match=r"data.heldout \[7\] must be within 0..4"):
+        heldout_views([7], 5, "data.heldout")

@@ -41,3 +41,54 @@ def test_a_clean_capture_leaves_no_view_out_and_too_many_bad_views_stop_the_run(
 
     with pytest.raises(ValueError, match="only 2 of the 6 training views are usable .*camera 0 .*lost the background"):
         capture(_variant(written, tmp_path, None, blank), FLOW, binning=8)
+
+
+def _quality_warnings(caplog) -> str:
+    return " ".join(r.getMessage() for r in caplog.records if r.levelname == "WARNING")
+
+
+def test_a_probe_box_smaller_than_the_flame_is_said_and_a_clean_one_is_not(written, tmp_path, caplog):
+    """Issue 38: a probe box smaller than the flame was reconstructed as ambient gas, with an INFO line only. Outside
+    the box's image the flow reads its noise (a sixth of the flame's displacements here and on the shared captures);
+    with the box cut to a third of its width it reads the flame there (about as large as inside)."""
+    with caplog.at_level("WARNING"):
+        capture(str(written[0]), FLOW, binning=8)
+    assert "outside the probe box's image" not in _quality_warnings(caplog)
+    caplog.clear()
+    shape = written[1].box.shape
+
+    def narrow(rig):
+        rig["probe"]["shape"] = [max(2, shape[0] // 3), shape[1], max(2, shape[2] // 3)]
+
+    with caplog.at_level("WARNING"):
+        capture(_variant(written, tmp_path, narrow), FLOW, binning=8)
+    said = _quality_warnings(caplog)
+    assert "views see the flame outside the probe box's image" in said and "enlarge probe.shape" in said, said
+
+
+def test_clipped_exposures_are_said_with_their_share(written, tmp_path, caplog):
+    """Issue 38: a 2x gain clipped at full scale passed without a word (3.6x the error). The clipped dots' centres
+    keep their texture around them, so no pixel is left out, but the share at full scale is reported."""
+    def gain(d):
+        for f in d.glob("*.png"):
+            img = _read(f)
+            _write(f, np.clip(img.astype(np.float32) * 2, 0, 255).astype(img.dtype))
+
+    with caplog.at_level("WARNING"):
+        cap = capture(_variant(written, tmp_path, None, gain), FLOW, binning=8)
+    said = _quality_warnings(caplog)
+    share = max(cap.measured["clipped"])
+    assert share > 0.05 and f"up to {100 * share:.0f} % of the pixels are at full scale" in said, said
+    assert "is left out" not in said
+
+
+def test_every_view_failing_alike_is_said_once(written, tmp_path):
+    """Every distorted image a copy of its reference: one sentence for the capture, not one reason per camera."""
+    def no_flame(d):
+        for k in range(7):
+            shutil.copy(d / f"reference_{k:02d}.png", d / f"distorted_{k:02d}.png")
+
+    with pytest.raises(ValueError, match="^no view is usable: in every view, its distorted image equals its "
+                                         "reference") as e:
+        capture(_variant(written, tmp_path, None, no_flame), FLOW, binning=8)
+    assert "camera 1" not in str(e.value)

@@ -66,10 +66,30 @@ def test_an_existing_folder_or_a_file_is_refused_and_overwrite_replaces_it_whole
     with pytest.raises(SystemExit):
         main([str(tmp_path / "typo"), *SMALL, "rig.n_camera=2"])
     assert "rig.n_camera" in capsys.readouterr().err and not (tmp_path / "typo").exists()
-    main([str(root), *SMALL, "rig.n_cameras=2", "--overwrite"])
+    main([str(root), "--overwrite", *SMALL, "rig.n_cameras=2"])  # issue 38: --overwrite anywhere on the line
     assert sorted(p.name for p in root.iterdir()) == ["distorted_00.png", "distorted_01.png", "reference_00.png",
                                                       "reference_01.png", RIG_FILE]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cap", "file"]  # no staging folder left
+
+
+def test_overwrite_keeps_a_link_and_refuses_the_folder_it_runs_in(tmp_path, capsys, monkeypatch):
+    """Issue 38: ``write_capture . --overwrite`` printed "error: 16" after rendering (renaming the folder it ran
+    in); through a link it replaced the link. The link is followed now (the capture is written where it points, the
+    link kept) and the folder the command runs in, or one holding it, is refused before anything is rendered."""
+    (tmp_path / "target").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "target")
+    root = main([str(tmp_path / "link"), *SMALL])
+    assert root == tmp_path / "target" and (tmp_path / "link").is_symlink()
+    main([str(tmp_path / "link"), "--overwrite", *SMALL, "rig.n_cameras=2"])
+    assert (tmp_path / "link").is_symlink() and read_rig(tmp_path / "link").n_views == 2
+    capsys.readouterr()
+    monkeypatch.chdir(tmp_path / "target")
+    for target in (".", str(tmp_path)):
+        with pytest.raises(SystemExit) as e:
+            main([target, "--overwrite", *SMALL, "phantom.shape=[abc]"])  # refused before the config is read
+        said = capsys.readouterr().err
+        assert e.value.code == 2 and "is the folder this command runs in (or holds it)" in said, said
+    assert read_rig(tmp_path / "target").n_views == 2
 
 
 def test_a_dirty_capture_is_written_and_its_burner_read_back_as_occluded(tmp_path, capsys):

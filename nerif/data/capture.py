@@ -29,7 +29,7 @@ from nerif.data.scene import (DATASETS, Scene, ViewImages, found_per_view, heldo
                               scene_from_displacements)
 from nerif.geometry import Camera, rays_in_box
 from nerif.physics import Ambient
-from nerif.sensing.flow import FLOW
+from nerif.sensing.flow import FLOW, check_flow
 from nerif.sensing.measurement import MEASUREMENT
 
 log = logging.getLogger(__name__)
@@ -123,6 +123,13 @@ def capture_frames(root: str, frames=None, **_) -> Optional[list[Frame]]:
     return [Frame(k, rig.frames[k].time_s) for k in picked]
 
 
+def probe_voxels(root: str) -> tuple[float, str]:
+    """The voxels of a capture folder's probe grid and the key that sets them, for the memory estimate before any
+    work (:func:`nerif.memory.check_memory`); the rig file checked as :func:`capture` reads it."""
+    rig = read_rig(dataset_folder(root))
+    return float(np.prod(rig.box.shape)), f"probe.shape in {rig.path}"
+
+
 @DATASETS.register("capture")
 def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto", heldout: Optional[list] = None,
             frames=None, frame: Optional[int] = None, truth: Optional[str] = None, device: str = "cpu") -> Scene:
@@ -147,18 +154,20 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
     if not 0 <= frame < len(rig.frames):
         raise ValueError(f"frame {frame}: {rig.path} lists {len(rig.frames)} frame(s)")
     distorted, references = capture_files(rig, frame)
-    full, cameras, roi, rays = rig_geometry(rig, binning, device)
-    held = heldout_views(heldout if heldout is not None else (rig.heldout if rig.heldout is not None else [len(cameras) - 1]), len(cameras))
-    prior = sigma_prior(rig, rig.ambient)
-    truth_T = read_truth(truth, rig.box) if truth is not None else None
     flame = [rig.root / f for f in rig.flame_only or ()]
     check_images(distorted + references + flame, rig.sensor_px)  # one bit depth for all, from the headers
+    full, cameras, roi, rays = rig_geometry(rig, binning, device)
+    held = heldout_views(heldout, len(cameras), "data.heldout") if heldout is not None else heldout_views(
+        list(rig.heldout) if rig.heldout is not None else [len(cameras) - 1], len(cameras), f"{rig.path}: heldout")
+    prior = sigma_prior(rig, rig.ambient)
+    truth_T = read_truth(truth, rig.box) if truth is not None else None
     lossy = lossy_images(distorted + references)
     if lossy:
         log.warning("%s", lossy)
     images, refs = read_images(distorted, rig.sensor_px), reference_images(references, rig.sensor_px)
     flames = reference_images(flame, rig.sensor_px, "flame") if flame else [None] * len(images)
     hidden = occluder_masks(rig, lambda paths: reference_images(paths, rig.sensor_px, "occluders"))
+    check_flow(flow)  # settings that cannot measure say so once, not as an empty view each
     quiet = outside_the_box(cameras, rays)
     measured = [MEASUREMENT.build(measure, distorted=images[v], reference=refs[v], flow=flow, flame=flames[v],
                                   hidden=hidden[v], grid_px=(cam.height, cam.width), region=roi, quiet=quiet[v],

@@ -42,6 +42,9 @@ def capture_files(rig: RigFile, frame: int = 0) -> tuple[list[Path], list[Path]]
     folders = {p.parent for p in listed if top in p.parents} | {top}  # the capture's own folders, not a shared one
     extra = sorted(str(p.relative_to(top)) for d in folders for p in d.iterdir()
                    if p.suffix.lower() in IMAGE_SUFFIXES and p.resolve() not in listed)
+    if extra and (top / "metrics.json").is_file():
+        raise ValueError(f"{root} holds a nerif run's outputs ({', '.join(extra)} beside metrics.json), written into "
+                         "the capture folder: move them out (a run's folder is hydra.run.dir)")
     if extra:
         raise ValueError(f"{root} holds image(s) {', '.join(extra)} that {RIG_FILE} does not list: add each to "
                          "views (with its angle) or to its frame, or move it out of the folder")
@@ -87,8 +90,16 @@ def _checked(path: Path, shape: tuple[int, int], dtype: np.dtype, sensor_px, dep
     if dtype not in FULL_SCALE:
         raise ValueError(f"{path} is {dtype}; nerif reads 8-bit or 16-bit greyscale images")
     if shape != (h, w):
+        if shape == (w, h):
+            hint = ": sensor_px is (width, height), swap its two numbers"
+        elif h % shape[0] == 0 and w % shape[1] == 0 and h // shape[0] == w // shape[1] > 1:
+            k = h // shape[0]
+            hint = (f": binned {k} x {k} in the camera? Then give the images' size as sensor_px and the binned pixel's "
+                    f"pitch ({k} times the sensor's) as pitch_um")
+        else:
+            hint = ": every image must be a full frame of the same camera"
         raise ValueError(f"{path} is {shape[1]} x {shape[0]} px but the rig's sensor_px (a calibration's "
-                         f"image_size) is {w} x {h}: every image must be a full frame of the same camera")
+                         f"image_size) is {w} x {h}{hint}")
     first = depth.setdefault("first", (dtype, path))
     if dtype != first[0]:
         raise ValueError(f"{path} is {dtype} but {first[1].name} is {first[0]}: save every image with the same "

@@ -17,6 +17,9 @@ from nerif.sensing.imaging import resample
 log = logging.getLogger(__name__)
 
 
+COARSE = 2.5  # rays wider than this many voxels of the probe grid leave its detail unmeasured (warned)
+
+
 def resolve_binning(setting, cameras: list[Camera], box: Optional[ProbeBox], sensor: str) -> int:
     """``data.binning`` for these full-sensor ``cameras``: ``auto`` (about one ray per voxel of ``box`` across,
     :func:`nerif.geometry.ray_binning`, logged), or a whole number that divides every camera's sensor (``sensor``
@@ -30,10 +33,18 @@ def resolve_binning(setting, cameras: list[Camera], box: Optional[ProbeBox], sen
                         "spans %.1f pixels; set data.binning (or crop the images to a size it divides)",
                         b, b, sensor, per_voxel)
         return b
+    if isinstance(setting, float) and setting.is_integer():
+        setting = int(setting)  # 4.0 is 4
     if isinstance(setting, bool) or not isinstance(setting, int) or setting < 1:
         raise ValueError(f"data.binning={setting!r}: auto or a whole number of pixels (at least 1)")
     if any(c.width % setting or c.height % setting for c in cameras):
         raise ValueError(f"data.binning={setting} must divide {sensor}")
+    per_voxel = pixels_per_voxel(cameras, box) if box is not None else 0.0
+    if per_voxel > 0 and setting > COARSE * per_voxel:
+        cam = cameras[0]
+        log.warning("data.binning=%d: a ray spans %.1f voxels of the probe grid across (%d x %d rays a view), so the "
+                    "field's detail finer than that is not measured; lower data.binning (auto: %d)", setting,
+                    setting / per_voxel, cam.width // setting, cam.height // setting, ray_binning(cameras, box))
     return setting
 
 

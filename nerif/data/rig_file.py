@@ -11,7 +11,8 @@ from typing import Optional
 import numpy as np
 import yaml
 
-from nerif.data.calibration import calibrated_camera, calibration_entry, read_calibration
+from nerif.data.calibration import (DISTANCE_MM, F_NUMBER, FOCAL_MM, PITCH_UM, calibrated_camera, calibration_entry, plausible,
+                                    read_calibration)
 from nerif.geometry import Camera, ProbeBox, arc_rig
 from nerif.physics import Ambient
 
@@ -244,9 +245,9 @@ def _arc_lens(path: Path, rig: dict) -> tuple[ArcLens, tuple[int, int]]:
     for k in ARC_KEYS + ("sensor_px",):
         _need(cam, k, f"{path} camera")
     values = {k: _positive(cam[k], f"{path}: camera.{k}") for k in ARC_KEYS}
-    if values["pitch_um"] < 0.5:  # no camera has pixels under half a micrometre: a pitch in millimetres
-        raise ValueError(f"{path}: camera.pitch_um = {cam['pitch_um']} is in micrometres (a pitch of "
-                         f"{cam['pitch_um']} mm is {cam['pitch_um'] * 1e3:g})")
+    for key, limits in (("focal_mm", FOCAL_MM), ("pitch_um", PITCH_UM), ("camera_to_centre_mm", DISTANCE_MM),
+                        ("camera_to_background_mm", DISTANCE_MM), ("f_number", F_NUMBER)):
+        plausible(values[key], limits, f"{path}: camera.{key}")
     if not values["camera_to_background_mm"] > values["camera_to_centre_mm"]:
         raise ValueError(f"{path}: camera.camera_to_background_mm = {cam['camera_to_background_mm']} must exceed "
                          f"camera.camera_to_centre_mm = {cam['camera_to_centre_mm']} (the background lies behind the "
@@ -283,7 +284,8 @@ def _calibrated_cameras(path: Path, rig: dict) -> list[_Calibrated]:
         raise ValueError(f"{path}: the cameras' image sizes differ ({sorted(sizes)}); nerif needs one size for all")
     if len({c["name"] for c in cal}) != len(cal):
         raise ValueError(f"{path}: two cameras share a name")
-    f_number = float(_optional(rig, "f_number", 32.0))
+    f_number = plausible(_positive(_optional(rig, "f_number", 32.0), f"{path}: f_number"), F_NUMBER,
+                         f"{path}: f_number")
     return [_Calibrated(calibrated_camera(c, f_number), c["image"], c["reference"]) for c in cal]
 
 
@@ -306,7 +308,9 @@ def _frames(rig: dict, views: dict, n: int, path: Path) -> tuple[RigFrame, ...]:
         raise ValueError(f"{path}: frames must be a list of frames, each with its time_s and images")
     for k, fr in enumerate(frames):
         images = _need(fr, "images", f"{path} frame {k}")
-        _need(fr, "time_s", f"{path} frame {k}")
+        t = _need(fr, "time_s", f"{path} frame {k}")
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not np.isfinite(t):
+            raise ValueError(f"{path}: frame {k}'s time_s = {t!r} must be a number of seconds")
         if not isinstance(images, list) or len(images) != n:
             got = len(images) if isinstance(images, list) else "no list of"
             raise ValueError(f"{path}: frame {k} lists {got} images for {n} views (views.angles_deg): every frame "

@@ -321,11 +321,16 @@ def view_span_deg(cameras: list[Camera]) -> float:
     return float(np.rad2deg(np.arccos(cos.min())))
 
 
-def heldout_views(heldout, n_views: int) -> list[int]:
-    """Sorted distinct held-out view indices, checked: within range and leaving a view to train on."""
+def heldout_views(heldout, n_views: int, what: str = "the held-out views") -> list[int]:
+    """Sorted distinct held-out view indices, checked: a list of whole numbers (``what`` names the setting in the
+    sentence otherwise), within range and leaving a view to train on."""
+    if not isinstance(heldout, (list, tuple)) or any(
+            isinstance(v, bool) or not isinstance(v, (int, float)) or not float(v).is_integer() for v in heldout):
+        example = f"[{heldout}]" if isinstance(heldout, int) and not isinstance(heldout, bool) else "[0, 4]"
+        raise ValueError(f"{what}={heldout!r} must be a list of view indices, such as {example}")
     held = sorted({int(v) for v in heldout})
     if any(not 0 <= v < n_views for v in held):
-        raise ValueError(f"held-out views {held} must be within 0..{n_views - 1}")
+        raise ValueError(f"{what} {held} must be within 0..{n_views - 1}")
     if len(held) >= n_views:
         raise ValueError(f"all {n_views} views are held out: at least one must be trained on")
     return held

@@ -4,7 +4,9 @@ images swapped) otherwise erases the flame: the hull intersects every view's mas
 view says. A view found bad is left out with one warning naming it and why; too few left and the run stops.
 
 Each check compares a view with itself (its two exposures, from :func:`nerif.sensing.measurement.images_compared`)
-or with the other views (its displacements' size and sign), so that it holds for any flame."""
+or with the other views (its displacements' size and sign), so that it holds for any flame. Two more say what
+concerns the whole capture without leaving a view out: the flame seen beyond the probe box (:func:`beyond_the_box`)
+and exposures clipped at full scale (:func:`clipping`)."""
 from __future__ import annotations
 
 import logging
@@ -20,12 +22,55 @@ TEXTURE_LOST = 0.3  # the distorted exposure's contrast over its reference's bel
 ABSENT, WILD = 0.25, 4.0  # a view's RMS displacement against the views' median: below, no flame; above, no flow
 SIGN = 0.2  # hot evidence (:func:`nerif.data.scene.hot_evidence`) beyond which a view's sign is clear
 KNOCKED_PX = 1.0  # a shake larger than this [px of the full sensor] and than its flame's displacements: knocked
+CLIPPED = 0.05  # a view with more of its pixels at full scale than this is said to clip (nerif's own chain: 2 %)
+OUTSIDE = 0.5  # displacements outside the box's image above this share of those inside: the flame is not in the box
 
 
 def _rms_displacement(scene: Scene, v: int) -> float:
     """A view's RMS image displacement [px of the full sensor] over its rays (0 where it has none)."""
     u = scene.displacement_px[scene.view_slice(v)].double()
     return float(u.norm(dim=-1).pow(2).mean().sqrt()) if len(u) else 0.0
+
+
+def _reach(scene: Scene, v: int) -> float:
+    """A view's largest flame displacement, the 99th percentile of their size over its rays [px of the full
+    sensor] (0 where it has none)."""
+    u = scene.displacement_px[scene.view_slice(v)].double().norm(dim=-1)
+    return float(u.quantile(0.99)) if len(u) else 0.0
+
+
+def beyond_the_box(scene: Scene) -> str:
+    """A sentence where the views see displacements outside the probe box's image nearly as large as inside it
+    (above :data:`OUTSIDE` of them; the measurement's ``outside_px``), else \"\". Outside the box's image no flame
+    should deflect: there the flow reads its noise (a sixth of the flame's on the shared captures). Where it reads
+    the flame, the flame is larger than the box, or the rig's geometry (focal length, pitch, distances, binning in
+    the camera) draws the box smaller or elsewhere than it is in the images; a field in the box cannot explain
+    those rays either way."""
+    outside = (scene.measured or {}).get("outside_px") or [None] * scene.n_views
+    seen = [(v, o, _reach(scene, v)) for v, o in enumerate(outside) if o is not None]
+    hit = [(v, o, r) for v, o, r in seen if r > 0 and o > OUTSIDE * r]
+    if not hit:
+        return ""
+    names = ", ".join(scene.cameras[v].name for v, _, _ in hit)
+    o, r = float(np.median([h[1] for h in hit])), float(np.median([h[2] for h in hit]))
+    return (f"{len(hit)} of {len(seen)} views see the flame outside the probe box's image ({names}: {o:.2f} px "
+            f"there against {r:.2f} px inside, 99th percentiles): the flame reaches beyond the probe box, or the rig's "
+            "geometry (camera.focal_mm, pitch_um with the images' binning in the camera, the distances) draws the box "
+            "elsewhere than it is; enlarge probe.shape or check rig.yaml")
+
+
+def clipping(scene: Scene) -> str:
+    """A sentence naming the views with more than :data:`CLIPPED` of their pixels at full scale in either exposure
+    (the measurement's ``clipped``), else "". Those pixels are kept where the texture survives around them (the
+    centres of bright dots), but the flow reads their displacement less well: with a 2x gain clipped at full scale,
+    the error of a run rose 3.6-fold (issue 38's probe)."""
+    clipped = (scene.measured or {}).get("clipped") or [0.0] * scene.n_views
+    hit = [(scene.cameras[v].name, c) for v, c in enumerate(clipped) if c > CLIPPED]
+    if not hit:
+        return ""
+    worst = max(c for _, c in hit)
+    return (f"{', '.join(n for n, _ in hit)}: up to {100 * worst:.0f} % of the pixels are at full scale in an exposure "
+            "(clipped), where the flow reads displacements less well: lower the exposure or the gain")
 
 
 def bad_views(scene: Scene) -> dict[int, str]:
@@ -49,10 +94,7 @@ def bad_views(scene: Scene) -> dict[int, str]:
         elif f.get("texture_ratio", 1.0) < TEXTURE_LOST:
             why[v] = (f"its distorted image has lost the background's texture ({100 * f['texture_ratio']:.0f} % of its "
                       "reference's contrast: black, flat, overexposed or out of focus?)")
-    reach = {}  # each view's largest flame displacement (99th percentile) [px of the full sensor]
-    for v in range(scene.n_views):
-        u = scene.displacement_px[scene.view_slice(v)].double().norm(dim=-1)
-        reach[v] = float(u.quantile(0.99)) if len(u) else 0.0
+    reach = {v: _reach(scene, v) for v in range(scene.n_views)}
     rest = [v for v in range(scene.n_views) if v not in why]
     for v in rest:
         shake = float(np.hypot(*per_view[v].get("shake_px", (0.0, 0.0))))
@@ -81,23 +123,39 @@ def bad_views(scene: Scene) -> dict[int, str]:
     return why
 
 
-def screened(scene: Scene, heldout: list[int], min_views: int = 3) -> Scene:
-    """``scene`` (every view of a capture) without its :func:`bad_views`, each named in a warning, split into the
-    training views and the ``heldout`` ones that remain; raises where fewer than ``min_views`` training views (or
-    half of them) remain."""
-    bad = bad_views(scene)
+def _grouped(scene: Scene, bad: dict[int, str]) -> list[tuple[str, str]]:
+    """(the views' names, the reason) once a reason, naming every view it holds for."""
+    by_reason: dict[str, list[str]] = {}
     for v, reason in sorted(bad.items()):
-        log.warning("%s is left out: %s", scene.cameras[v].name, reason)
-    if not bad:
-        return scene.split_views(heldout)
+        by_reason.setdefault(reason, []).append(scene.cameras[v].name)
+    return [(", ".join(names), reason) for reason, names in by_reason.items()]
+
+
+def screened(scene: Scene, heldout: list[int], min_views: int = 3) -> Scene:
+    """``scene`` (every view of a capture) without its :func:`bad_views`, each named in a warning (views left out
+    for one reason in one), split into the training views and the ``heldout`` ones that remain; raises where fewer
+    than ``min_views`` training views (or half of them) remain. Warns where the views kept see the flame beyond the
+    probe box (:func:`beyond_the_box`)."""
+    bad = bad_views(scene)
     train = [v for v in range(scene.n_views) if v not in bad and v not in heldout]
     planned = scene.n_views - len([v for v in heldout if 0 <= v < scene.n_views])
-    if len(train) < max(min_views, (planned + 1) // 2):
+    if bad and len(train) < max(min_views, (planned + 1) // 2):
+        groups = _grouped(scene, bad)
+        if len(groups) == 1 and len(bad) == scene.n_views:  # one cause everywhere: the capture or a setting
+            raise ValueError(f"no view is usable: in every view, {groups[0][1]}")
         raise ValueError(f"only {len(train)} of the {planned} training views are usable ("
-                         + "; ".join(f"{scene.cameras[v].name}: {r}" for v, r in sorted(bad.items()))
+                         + "; ".join(f"{names}: {reason}" for names, reason in groups)
                          + "): fix their images, or drop them from rig.yaml")
+    for names, reason in _grouped(scene, bad):
+        log.warning("%s %s left out: %s", names, "is" if "," not in names else "are", reason)
     keep = [v for v in range(scene.n_views) if v not in bad]
+    kept = scene.select_views(keep) if bad else scene
+    for said in (beyond_the_box(kept), clipping(kept)):
+        if said:
+            log.warning("%s", said)
+    if not bad:
+        return scene.split_views(heldout)
     held = [keep.index(v) for v in heldout if v in keep]
     if heldout and not held:
         log.warning("no held-out view remains: the run is scored on no view it did not train on")
-    return scene.select_views(keep).split_views(held)
+    return kept.split_views(held)

@@ -92,6 +92,9 @@ class HashGrid(nn.Module):
         if kernel in hash_kernel.BACKENDS and not hash_kernel.available(kernel):
             raise ValueError(f"hash kernel '{kernel}' cannot run here ({_NEEDS[kernel]}): use encoder.kernel=auto")
         self.kernel = kernel
+        for what, n in (("field.hash_levels", n_levels), ("encoder.n_features", n_features)):
+            if isinstance(n, bool) or not isinstance(n, int) or n < 1:  # 0 levels: the CPU kernel divides by it
+                raise ValueError(f"{what}={n!r} must be a whole number of at least 1")
         if not 1 <= base_resolution <= max_resolution:
             raise ValueError(f"hash resolutions need 1 <= base ({base_resolution}) <= max ({max_resolution})")
         if not 4 <= log2_table_size <= 24:

@@ -2,9 +2,11 @@
 from __future__ import annotations
 
 import base64
+import errno
 import json
 import math
 import os
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Callable
@@ -36,7 +38,19 @@ def atomic_write(path: Path, write: Callable[[str], None]) -> Path:
 
 
 def atomic_save_torch(obj, path: Path) -> Path:
-    return atomic_write(path, lambda tmp: torch.save(obj, tmp))
+    """``torch.save`` of ``obj`` to ``path``, atomically; a failed write is an :class:`OSError`, as any other file's
+    (torch's zip writer reports a full disk as a RuntimeError: "PytorchStreamWriter failed writing file")."""
+    def write(tmp):
+        try:
+            torch.save(obj, tmp)
+        except RuntimeError as e:
+            if "writ" not in str(e):  # not a failed write: a bug, as it is
+                raise
+            full = shutil.disk_usage(Path(tmp).parent).free < 1 << 20
+            raise OSError(errno.ENOSPC if full else errno.EIO,
+                          "No space left on device" if full else str(e).strip().splitlines()[-1]) from e
+
+    return atomic_write(path, write)
 
 
 def strict_json(obj):

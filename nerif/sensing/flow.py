@@ -6,6 +6,7 @@ Every estimator is ``fn(distorted, reference, **params) -> (H, W, 2) float32 [px
 """
 from __future__ import annotations
 
+import inspect
 from typing import Optional
 
 import cv2
@@ -148,8 +149,46 @@ def dis(distorted: np.ndarray, reference: np.ndarray, preset: str = "medium", pa
                "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM}
     if preset not in presets:
         raise ValueError(f"DIS preset '{preset}' unknown; choose one of: {', '.join(presets)}")
+    for key, value, least in (("patch_size", patch_size, 2), ("patch_stride", patch_stride, 1),
+                              ("refinement_iterations", refinement_iterations, 0)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:  # OpenCV would crash the process
+            raise ValueError(f"flow.{key}={value!r} must be a whole number, at least {least}")
+    if patch_stride > patch_size:
+        raise ValueError(f"flow.patch_stride={patch_stride} must not exceed flow.patch_size={patch_size}")
     est = cv2.DISOpticalFlow_create(presets[preset])
     est.setPatchSize(patch_size)
     est.setPatchStride(patch_stride)
     est.setVariationalRefinementIterations(refinement_iterations)
     return est.calc(to_uint8(distorted), to_uint8(reference), None)
+
+
+TEST_SHIFT_PX = (0.6, -0.4)  # the known shift of :func:`check_flow`'s test pair (column, row) [px]
+TEST_TOLERANCE_PX = 0.2  # the median error a flow may make on it
+
+
+def check_flow(flow: dict) -> None:
+    """One sentence, before any image is read, where the settings of ``flow`` (a :data:`FLOW` config) cannot
+    measure: the flow must find a known shift (:data:`TEST_SHIFT_PX`) of a random texture (128 x 128 px, blurred
+    over 1.5 px) within :data:`TEST_TOLERANCE_PX` in the median. Settings OpenCV refuses, and settings it takes but
+    that measure nothing (a window of 0 px, no pyramid level), both say so here rather than as an empty view each."""
+    rng = np.random.default_rng(0)
+    reference = cv2.GaussianBlur(rng.random((128, 128)).astype(np.float32), (0, 0), 1.5)
+    reference = 0.5 + 0.35 * (reference - reference.mean()) / reference.std()
+    u_true = np.broadcast_to(np.float32(TEST_SHIFT_PX), (128, 128, 2))
+    distorted = warped(reference, u_true)
+    defaults = {k: p.default for k, p in inspect.signature(FLOW.get(flow["name"])).parameters.items()}
+    changed = {k: v for k, v in flow.items() if k != "name" and defaults.get(k, object()) != v}
+    settings = ", ".join(f"flow.{k}={v}" for k, v in (changed or flow).items() if k != "name") or "its defaults"
+    try:
+        u, _ = estimate(flow, distorted, reference)
+    except cv2.error as e:
+        said = (e.err or str(e)).strip().splitlines()[0]
+        raise ValueError(f"flow={flow['name']} cannot run with {settings}: OpenCV says \"{said}\"") from None
+    centre = np.asarray(u)[16:-16, 16:-16] - np.float32(TEST_SHIFT_PX)
+    error = np.linalg.norm(centre, axis=-1)
+    median = float(np.nanmedian(error)) if np.isfinite(error).any() else float("inf")
+    if not median <= TEST_TOLERANCE_PX:
+        found = "no estimate" if not np.isfinite(median) else f"an error of {median:.2f} px"
+        raise ValueError(f"flow={flow['name']} with {settings} cannot measure a known shift of "
+                         f"({TEST_SHIFT_PX[0]}, {TEST_SHIFT_PX[1]}) px on a test texture ({found}): look at the "
+                         "flow.* settings (config group flow)")

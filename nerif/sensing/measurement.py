@@ -21,8 +21,8 @@ from nerif.sensing.flame_light import without_flame_light
 from nerif.sensing.flow import estimate, texture_width
 from nerif.sensing.imaging import resample
 from nerif.sensing.occlusion import local_contrast, occluded
-from nerif.sensing.saturation import saturated
-from nerif.sensing.shake import rigid_shift
+from nerif.sensing.saturation import TOP, saturated
+from nerif.sensing.shake import MIN_QUIET, rigid_shift
 from nerif.sensing.vectors import median_test
 
 log = logging.getLogger(__name__)
@@ -61,17 +61,29 @@ def _on_grid(mask: np.ndarray, h: int, w: int) -> np.ndarray:
     return resample(mask.astype(np.float32), h, w) > 0
 
 
+def outside_reach(u: np.ndarray, valid: np.ndarray, quiet: Optional[np.ndarray]) -> Optional[float]:
+    """The 99th percentile of the displacements' size [the unit of ``u``, (h, w, 2)] on the usable pixels that see
+    no flame (``quiet``: outside the probe box's image), None where fewer than :data:`~nerif.sensing.shake.MIN_QUIET`
+    are: the measurement's noise there, unless the flame reaches beyond the box or the rig puts the box elsewhere."""
+    if quiet is None or int((quiet & valid).sum()) < MIN_QUIET:
+        return None
+    return float(np.quantile(np.linalg.norm(u[quiet & valid], axis=-1), 0.99))
+
+
 def images_compared(distorted: np.ndarray, reference: np.ndarray, width_px: float,
                     contrast: Optional[np.ndarray] = None) -> dict:
     """What a view's two exposures (H, W) say of each other, for :mod:`nerif.data.view_check`: ``difference_rms``,
     the RMS of their difference [share of full scale] (0: the same image), and ``texture_ratio``, the distorted
     exposure's median local contrast (:func:`~nerif.sensing.occlusion.local_contrast` over the texture's width
-    ``width_px``) over the reference's (about 1: the same background; near 0: black, flat or overexposed);
+    ``width_px``) over the reference's (about 1: the same background; near 0: black, flat or overexposed), and
+    ``clipped``, the share of pixels at full scale in either exposure (the dots' centres included, which
+    :func:`~nerif.sensing.saturation.saturated` keeps: they still cost accuracy);
     ``contrast``: the reference's local contrast where the caller has it."""
     d, r = np.float32(distorted), np.float32(reference)
     ref = float(np.median(local_contrast(r, width_px) if contrast is None else contrast))
     ratio = float(np.median(local_contrast(d, width_px))) / ref if ref > 0 else 1.0
-    return {"difference_rms": float(np.sqrt(np.mean((d - r) ** 2))), "texture_ratio": ratio}
+    return {"difference_rms": float(np.sqrt(np.mean((d - r) ** 2))), "texture_ratio": ratio,
+            "clipped": float(np.mean((d >= TOP) | (r >= TOP)))}
 
 
 def _either(a: Optional[np.ndarray], b: Optional[np.ndarray]) -> Optional[np.ndarray]:
@@ -136,7 +148,7 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     valid &= ~rejected
     u[~valid] = np.nan
     peak = float(np.linalg.norm(u[valid], axis=-1).max()) if valid.any() else 0.0
-    found.update(displacement_max_px=peak, valid_fraction=float(valid.mean()))
+    found.update(displacement_max_px=peak, valid_fraction=float(valid.mean()), outside_px=outside_reach(u, valid, quiet))
     left = ", ".join(f"{100 * found[k]:.1f} % {k}" for k in ("saturated", "occluded", "unmeasured", "rejected")
                      if found[k] > 0)
     log.info("%s: displacement up to %.2f px; shake (%+.3f, %+.3f) px taken off%s%s", name or "view", peak, s[0], s[1],
