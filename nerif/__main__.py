@@ -36,7 +36,13 @@ def check_overrides(cfg: DictConfig, overrides) -> None:
     recorded data, whose cameras come from the data's own files."""
     groups = {p.name for p in config_dir().iterdir() if p.is_dir()}
     choices = [o for o in overrides if o.lstrip("+~").split("=")[0] in groups]
-    check_kinds(cfg, hydra.compose(config_name="config", overrides=choices), overrides)
+    try:
+        defaults = hydra.compose(config_name="config", overrides=choices)
+    except Exception as e:  # a launcher that left Hydra's config search uninitialised: the components check
+        logging.getLogger("nerif").debug("the settings' kinds are not checked here: %s", e)
+        defaults = None
+    if defaults is not None:
+        check_kinds(cfg, defaults, overrides)
     if cfg.data.name == "synthetic":
         return
     ignored = [o for o in overrides if o.lstrip("+~").startswith("rig.")]
@@ -68,8 +74,7 @@ def unexpected(e: BaseException) -> str:
     from a value of the wrong kind): its type and first line, and how to see where it arose."""
     said = getattr(e, "err", None) or str(e)  # cv2.error: its short message
     first = next((ln.strip() for ln in str(said).splitlines() if ln.strip()), "")
-    return (f"nerif stopped on {type(e).__name__}: {first or 'no message'}; the settings and files named above are "
-            "the place to look (add debug=true to see the traceback)")
+    return f"nerif stopped on {type(e).__name__}: {first or 'no message'} (add debug=true to see where it arose)"
 
 
 def stop(message: str) -> float:

@@ -143,6 +143,10 @@ def _read(path):
      "camera.camera_to_centre_mm = 0.8 .*a distance in metres"),
     (lambda r: r.update(heldout=3), None, ValueError, "heldout = 3 must be a list of whole numbers"),
     (lambda r: r["camera"].update(f_number=3200), None, ValueError, "camera.f_number = 3200 is outside what cameras have"),
+    (lambda r: r["views"]["images"].__setitem__(0, 5), None, ValueError,
+     "views.images\\[0\\] = 5 must be a file name, or a list of file names \\(the exposures of one state\\)"),
+    (lambda r: r["views"]["images"].__setitem__(2, ["distorted_02.png", "distorted_02b.png"]), None, FileNotFoundError,
+     "view 2 image 'distorted_02b.png', which does not exist"),
     (lambda r: r["ambient"].update(n0=1.27), None, ValueError, "ambient.n0 = 1.27 must be a gas's refractive index"),
     (lambda r: r.update(roi_px=[0, 0, 240]), None, ValueError, "roi_px \\(x, y, width, height\\) = \\[0, 0, 240\\] must "
      "be 4 whole numbers"),
@@ -208,7 +212,7 @@ def test_one_shared_reference(written, tmp_path):
 
     root = _variant(written, tmp_path, share, drop)
     distorted, references = capture_files(read_rig(Path(root)))
-    assert len(distorted) == 7 and {p.name for p in references} == {"reference_00.png"}
+    assert len(distorted) == 7 and {p.name for files in references for p in files} == {"reference_00.png"}
 
 
 SERIES = [o for o in SMALL if not o.startswith("phantom")] + [
@@ -415,3 +419,61 @@ def test_jpeg_images_are_read_with_a_warning_that_names_the_lossy_format(written
     with caplog.at_level("WARNING"):
         capture(_variant(written, tmp_path, to_jpeg, convert), FLOW, binning=8)
     assert "7 of the capture's 14 images are JPEG (distorted_00.jpg, ...), a lossy format" in caplog.text
+
+
+def test_the_noise_of_k_exposures_averaged_falls_as_one_over_sqrt_k():
+    """Issue 39: the noise of the mean of K exposures, estimated from their spread, against the noise put in."""
+    from nerif.data.capture_images import exposure_noise
+
+    rng = np.random.default_rng(0)
+    image = rng.random((120, 160)).astype(np.float32)
+    sigma = 0.02
+    noise = {k: exposure_noise(image + rng.normal(0, sigma, (k, 120, 160)).astype(np.float32)) for k in (1, 2, 8, 32)}
+    assert noise[1] is None
+    for k in (2, 8, 32):
+        assert noise[k] == pytest.approx(sigma / np.sqrt(k), rel=0.03), (k, noise[k])
+    assert noise[8] / noise[2] == pytest.approx(0.5, rel=0.04)
+
+
+def test_several_exposures_per_view_are_averaged(written, tmp_path):
+    """Issue 39: a view's image may be a list of files in rig.yaml, the exposures of one state: they are averaged,
+    their noise is reported per view, and the displacements come nearer the truth than from one exposure."""
+    rng = np.random.default_rng(1)
+    k, sigma = 4, 0.04
+
+    def noisy(rig):
+        rig["views"]["images"] = [[f"distorted_{v:02d}_{e}.png" for e in range(k)] for v in range(7)]
+
+    def expose(d):  # images lifted to mid-grey (the noise unclipped), then K noisy exposures of each distorted one
+        for v in range(7):
+            _write(d / f"reference_{v:02d}.png", np.rint(64 + 0.6 * _read(d / f"reference_{v:02d}.png")).astype(np.uint8))
+            clean = 64 + 0.6 * _read(d / f"distorted_{v:02d}.png").astype(np.float32)
+            for e in range(k):
+                _write(d / f"distorted_{v:02d}_{e}.png",
+                       np.clip(np.rint(clean + rng.normal(0, 255 * sigma, clean.shape)), 0, 255).astype(np.uint8))
+            (d / f"distorted_{v:02d}.png").unlink()
+
+    root = _variant(written, tmp_path / "k", noisy, lambda d: expose(d))
+    many = capture(root, FLOW, binning=8)
+    assert many.measured["exposures"][0] == [k, 1]
+    assert all(n == pytest.approx(sigma / np.sqrt(k), rel=0.1) for n in many.measured["image_noise"]), \
+        many.measured["image_noise"]
+    assert many.measured["reference_noise"][0] is None
+
+    def single(rig):
+        rig["views"]["images"] = [f"distorted_{v:02d}_0.png" for v in range(7)]
+
+    def one(d):
+        expose(d)
+        for v in range(7):
+            for e in range(1, k):
+                (d / f"distorted_{v:02d}_{e}.png").unlink()
+
+    once = capture(_variant(written, tmp_path / "one", single, one), FLOW, binning=8)
+    truth = written[1].eps[: int(written[1].view_start[6])]
+
+    def error(scene):
+        return float((scene.eps - truth).norm(dim=-1).pow(2).mean().sqrt())
+
+    assert once.measured["image_noise"][0] is None
+    assert error(many) < 0.8 * error(once), (error(many), error(once))

@@ -28,7 +28,7 @@ def test_the_rig_file_describes_the_cameras_that_took_the_images(tmp_path, capsy
     assert yaml.safe_load((root / RIG_FILE).read_text())["T_max"] == 2000.0
     import cv2
 
-    img = cv2.imread(str(distorted[0]), cv2.IMREAD_UNCHANGED)
+    img = cv2.imread(str(distorted[0][0]), cv2.IMREAD_UNCHANGED)
     assert img.shape == (320, 240) and img.dtype == np.uint8 and img.std() > 30
 
 
@@ -44,10 +44,10 @@ def test_a_time_series_is_written_frame_by_frame(tmp_path, capsys):
     assert rig.frames[1].images == tuple(f"frame_0001/distorted_{v:02d}.png" for v in range(3))
     d0, refs = capture_files(rig, 0)
     d1, refs1 = capture_files(rig, 1)
-    assert refs == refs1 and all(p.is_file() for p in d0 + d1)
+    assert refs == refs1 and all(p.is_file() for files in d0 + d1 for p in files)
     import cv2
 
-    a, b = (cv2.imread(str(d[0]), cv2.IMREAD_UNCHANGED).astype(float) for d in (d0, d1))
+    a, b = (cv2.imread(str(d[0][0]), cv2.IMREAD_UNCHANGED).astype(float) for d in (d0, d1))
     assert np.abs(a - b).max() > 0  # the flame moved between the frames
 
 

@@ -20,7 +20,7 @@ from typing import Optional
 import numpy as np
 import torch
 
-from nerif.data.capture_images import capture_files, check_images, lossy_images, occluder_masks, read_images
+from nerif.data.capture_images import capture_files, check_images, lossy_images, occluder_masks, read_exposures
 from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest, resolve_binning
 from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.rig_file import RigFile, read_rig
@@ -87,12 +87,14 @@ def _rig_digest(rig: RigFile) -> str:
 _REFERENCES: dict = {}  # the last capture's reference images (and flame-only ones), keyed by their files
 
 
-def reference_images(paths: list[Path], sensor_px, kind: str = "reference") -> list[np.ndarray]:
-    """Images every frame of a series shares (the references, the flame-only exposures), decoded once
-    (:func:`read_images`; decoded again when a file changes)."""
-    key = tuple((str(p.resolve()), p.stat().st_mtime_ns, p.stat().st_size) for p in paths)
+def reference_images(views: list[tuple[Path, ...]], sensor_px, kind: str = "reference"
+                     ) -> tuple[list[np.ndarray], list[Optional[float]]]:
+    """Images every frame of a series shares (the references, the flame-only exposures, the occluder masks), each
+    view's the mean of its exposures with its noise (:func:`read_exposures`), decoded once (again when a file
+    changes)."""
+    key = tuple((str(p.resolve()), p.stat().st_mtime_ns, p.stat().st_size) for files in views for p in files)
     if _REFERENCES.get(kind, {}).get("key") != key:
-        _REFERENCES[kind] = {"key": key, "value": read_images(paths, sensor_px)}
+        _REFERENCES[kind] = {"key": key, "value": read_exposures(views, sensor_px)}
     return _REFERENCES[kind]["value"]
 
 
@@ -119,7 +121,7 @@ def capture_frames(root: str, frames=None, **_) -> Optional[list[Frame]]:
     for k in picked:
         d, references = capture_files(rig, k)
         distorted += d
-    check_images(distorted + references, rig.sensor_px)
+    check_images([p for files in distorted + references for p in files], rig.sensor_px)
     return [Frame(k, rig.frames[k].time_s) for k in picked]
 
 
@@ -155,24 +157,32 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
         raise ValueError(f"frame {frame}: {rig.path} lists {len(rig.frames)} frame(s)")
     distorted, references = capture_files(rig, frame)
     flame = [rig.root / f for f in rig.flame_only or ()]
-    check_images(distorted + references + flame, rig.sensor_px)  # one bit depth for all, from the headers
+    check_images([p for files in distorted + references for p in files] + flame, rig.sensor_px)  # one bit depth
+    # for all, from the headers
     full, cameras, roi, rays = rig_geometry(rig, binning, device)
     held = heldout_views(heldout, len(cameras), "data.heldout") if heldout is not None else heldout_views(
         list(rig.heldout) if rig.heldout is not None else [len(cameras) - 1], len(cameras), f"{rig.path}: heldout")
     prior = sigma_prior(rig, rig.ambient)
     truth_T = read_truth(truth, rig.box) if truth is not None else None
-    lossy = lossy_images(distorted + references)
+    lossy = lossy_images([p for files in distorted + references for p in files])
     if lossy:
         log.warning("%s", lossy)
-    images, refs = read_images(distorted, rig.sensor_px), reference_images(references, rig.sensor_px)
-    flames = reference_images(flame, rig.sensor_px, "flame") if flame else [None] * len(images)
-    hidden = occluder_masks(rig, lambda paths: reference_images(paths, rig.sensor_px, "occluders"))
+    (images, noise), (refs, ref_noise) = read_exposures(distorted, rig.sensor_px), reference_images(references,
+                                                                                                    rig.sensor_px)
+    flames = reference_images([(p,) for p in flame], rig.sensor_px, "flame")[0] if flame else [None] * len(images)
+    hidden = occluder_masks(rig, lambda paths: reference_images([(p,) for p in paths], rig.sensor_px, "occluders")[0])
     check_flow(flow)  # settings that cannot measure say so once, not as an empty view each
     quiet = outside_the_box(cameras, rays)
     measured = [MEASUREMENT.build(measure, distorted=images[v], reference=refs[v], flow=flow, flame=flames[v],
                                   hidden=hidden[v], grid_px=(cam.height, cam.width), region=roi, quiet=quiet[v],
                                   name=cam.name)
                 for v, cam in enumerate(cameras)]
+    for m, d, r, nd, nr in zip(measured, distorted, references, noise, ref_noise):  # K exposures averaged per image
+        m.found.update(exposures=[len(d), len(r)], image_noise=nd, reference_noise=nr)
+    if any(len(f) > 1 for f in distorted + references):
+        log.info("exposures averaged per view: %s distorted, %s reference; noise of the means %s",
+                 "/".join(str(len(f)) for f in distorted), "/".join(str(len(f)) for f in references),
+                 ", ".join("-" if n is None else f"{100 * n:.2f} %" for n in noise))
     views = [ViewImages(torch.as_tensor(r, device=device), torch.as_tensor(m.distorted, device=device), cam)
              for r, m, cam in zip(refs, measured, full)]
     scene = scene_from_displacements(rig.box, rig.ambient, cameras, [m.displacement for m in measured],

@@ -3,12 +3,13 @@ checked without decoding (a long series is checked before any flow runs), and gr
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Optional
 
 import cv2
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from nerif.data.rig_file import RIG_FILE, RigFile
+from nerif.data.rig_file import RIG_FILE, RigFile, exposures
 
 IMAGE_SUFFIXES = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
 FULL_SCALE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
@@ -17,27 +18,31 @@ _GREY_MODES = {"1": np.dtype(np.uint8), "L": np.dtype(np.uint8), "I;16": np.dtyp
                "I;16L": np.dtype(np.uint16), "I;16N": np.dtype(np.uint16)}
 
 
-def capture_files(rig: RigFile, frame: int = 0) -> tuple[list[Path], list[Path]]:
-    """The distorted and reference image of every view of ``frame``; raises for a missing file or an image the
-    rig file does not list (in the folder or in a folder of its frames)."""
+def capture_files(rig: RigFile, frame: int = 0) -> tuple[list[tuple[Path, ...]], list[tuple[Path, ...]]]:
+    """The distorted and reference image of every view of ``frame``, each the tuple of its exposures' files (one
+    file: a tuple of one); raises for a missing file or an image the rig file does not list (in the folder or in a
+    folder of its frames)."""
     root, n = rig.root, rig.n_views
-    distorted = [root / f for f in rig.frames[frame].images]
-    references = [root / f for f in rig.references]
+    distorted = [tuple(root / f for f in exposures(e)) for e in rig.frames[frame].images]
+    references = [tuple(root / f for f in exposures(e)) for e in rig.references]
     flame = [root / f for f in rig.flame_only or ()]
     masks = {v: root / f for v, f in enumerate(rig.occluders or ()) if f is not None}
     where = f"frame {frame} " if len(rig.frames) > 1 else ""
-    for k, p in enumerate(distorted + references + flame):
-        if not p.is_file():
-            kind = (f"{where}view {k} image" if k < n else f"view {k - n} reference" if k < 2 * n
-                    else f"view {k - 2 * n} flame_only image")
-            raise FileNotFoundError(f"{rig.path} lists {kind} '{p.relative_to(root)}', which does not exist "
-                                    f"in {root}: add the file or remove the {'frame' if where and k < n else 'view'}")
+    for k, files in enumerate(distorted + references + [(p,) for p in flame]):
+        for p in files:
+            if not p.is_file():
+                kind = (f"{where}view {k} image" if k < n else f"view {k - n} reference" if k < 2 * n
+                        else f"view {k - 2 * n} flame_only image")
+                raise FileNotFoundError(f"{rig.path} lists {kind} '{p.relative_to(root)}', which does not exist "
+                                        f"in {root}: add the file or remove the "
+                                        f"{'frame' if where and k < n else 'view'}")
     for v, p in masks.items():
         if not p.is_file():
             raise FileNotFoundError(f"{rig.path} lists view {v}'s occluder mask '{p.relative_to(root)}', which does "
                                     f"not exist in {root}: add the file or give null for that view")
     top = root.resolve()
-    listed = ({(root / f).resolve() for fr in rig.frames for f in fr.images} | {p.resolve() for p in references}
+    listed = ({(root / f).resolve() for fr in rig.frames for e in fr.images for f in exposures(e)}
+              | {p.resolve() for files in references for p in files}
               | {p.resolve() for p in flame} | {p.resolve() for p in masks.values()})
     folders = {p.parent for p in listed if top in p.parents} | {top}  # the capture's own folders, not a shared one
     extra = sorted(str(p.relative_to(top)) for d in folders for p in d.iterdir()
@@ -136,3 +141,24 @@ def read_images(paths: list[Path], sensor_px) -> list[np.ndarray]:
         _checked(p, img.shape, img.dtype, sensor_px, depth)
         out.append(img.astype(np.float32) / FULL_SCALE[img.dtype])
     return out
+
+
+def exposure_noise(stack: np.ndarray) -> Optional[float]:
+    """The noise of the mean of K exposures (K, H, W) of one state [share of full scale]: the RMS over pixels of their
+    spread about their mean (unbiased), over sqrt(K); None for one exposure (nothing to compare it with)."""
+    k = len(stack)
+    if k < 2:
+        return None
+    return float(np.sqrt(np.mean(np.var(stack, axis=0, ddof=1)) / k))
+
+
+def read_exposures(views: list[tuple[Path, ...]], sensor_px) -> tuple[list[np.ndarray], list[Optional[float]]]:
+    """Each view's image, the mean of its exposures (the tuple of its files), as (H, W) floats in [0, 1] of full
+    scale, and that mean's noise (:func:`exposure_noise`; None for one exposure). A view's exposures are decoded
+    together, the views one after another."""
+    images, noise = [], []
+    for files in views:
+        stack = np.stack(read_images(list(files), sensor_px))
+        images.append(stack.mean(0) if len(stack) > 1 else stack[0])
+        noise.append(exposure_noise(stack))
+    return images, noise

@@ -33,10 +33,11 @@ MIN_AMBIENT_K = 150.0  # an ambient temperature below this is not in kelvin (a r
 
 @dataclass(frozen=True)
 class RigFrame:
-    """One instant of a capture: ``time_s`` [s] and one distorted image file per view (relative to the folder)."""
+    """One instant of a capture: ``time_s`` [s] and one distorted image per view (relative to the folder): a file,
+    or a tuple of files, the exposures of that state (:func:`exposures`)."""
 
     time_s: float
-    images: tuple[str, ...]
+    images: tuple
 
 
 @dataclass(frozen=True)
@@ -58,7 +59,8 @@ class RigFile:
     Attributes:
         path: the rig file. version: its format version.
         sensor_px: (width, height) of every image [px]. angles_deg: (V,) the views' azimuths [deg].
-        references: (V,) each view's reference image file. frames: the instants, each with V distorted images.
+        references: (V,) each view's reference image: a file, or a tuple of files, its exposures (averaged).
+        frames: the instants, each with V distorted images (as ``references``).
         roi_px: (x, y, width, height) the region of interest on the sensor [px].
         box: the probe box. ambient: T0, n0 and T_max of the gas around the flame.
         heldout: the views never trained on (None: the default, the last view).
@@ -76,7 +78,7 @@ class RigFile:
     version: int
     sensor_px: tuple[int, int]
     angles_deg: tuple[float, ...]
-    references: tuple[str, ...]
+    references: tuple
     frames: tuple[RigFrame, ...]
     roi_px: tuple[int, int, int, int]
     box: ProbeBox
@@ -197,7 +199,8 @@ def read_rig(root: Path) -> RigFile:
     if isinstance(refs, list) and len(refs) != len(angles):
         raise ValueError(f"{path}: views.references lists {len(refs)} files for {len(angles)} views; give one "
                          "per view or a single shared file")
-    refs = refs if isinstance(refs, list) else [refs] * len(angles)
+    refs = [_exposures_entry(r, f"{path}: views.references[{v}]")
+            for v, r in enumerate(refs if isinstance(refs, list) else [refs] * len(angles))]
     probe, amb = _need(rig, "probe", str(path)), _need(rig, "ambient", str(path))
     shape = _integers(_need(probe, "shape", f"{path} probe"), 3, f"{path}: probe.shape")
     if min(shape) < 1:
@@ -232,7 +235,7 @@ def read_rig(root: Path) -> RigFile:
         if not 0 < lo < hi:
             raise ValueError(f"{path}: temperature_range_K {t_range} must be two increasing positive temperatures [K]")
     return RigFile(path, int(rig["version"]), (int(w), int(h)), angles,
-                   tuple(str(r) for r in refs), frames, roi, box, ambient, held,
+                   tuple(refs), frames, roi, box, ambient, held,
                    (lo, hi) if t_range is not None else None, lens, calibrated,
                    (path,) + ((path.parent / str(rig["calibration"]),) if "calibration" in rig else ()),
                    tuple(str(f) for f in flame) if flame is not None else None,
@@ -302,7 +305,7 @@ def _frames(rig: dict, views: dict, n: int, path: Path) -> tuple[RigFrame, ...]:
         if len(images) != n:
             raise ValueError(f"{path}: views.angles_deg has {n} angles but views.images lists {len(images)} "
                              "images; give one angle per image")
-        return (RigFrame(0.0, tuple(str(f) for f in images)),)
+        return (RigFrame(0.0, tuple(_exposures_entry(f, f"{path}: views.images[{v}]") for v, f in enumerate(images))),)
     frames = rig["frames"]
     if not isinstance(frames, list) or not frames:
         raise ValueError(f"{path}: frames must be a list of frames, each with its time_s and images")
@@ -318,4 +321,21 @@ def _frames(rig: dict, views: dict, n: int, path: Path) -> tuple[RigFrame, ...]:
         if k and not float(fr["time_s"]) > float(frames[k - 1]["time_s"]):
             raise ValueError(f"{path}: frame {k} has time_s {fr['time_s']}, not after frame {k - 1}'s "
                              f"{frames[k - 1]['time_s']}: list the frames in time order")
-    return tuple(RigFrame(float(fr["time_s"]), tuple(str(f) for f in fr["images"])) for fr in frames)
+    return tuple(RigFrame(float(fr["time_s"]), tuple(_exposures_entry(f, f"{path}: frames[{k}].images[{v}]")
+                                                     for v, f in enumerate(fr["images"])))
+                 for k, fr in enumerate(frames))
+
+
+def _exposures_entry(entry, what: str):
+    """One view's image of a rig file: a file name, or a list of file names (its exposures of one state, averaged:
+    the noise falls as 1 / sqrt(K)), checked; a list of one is that file."""
+    if isinstance(entry, list) and entry and all(isinstance(f, str) and f for f in entry):
+        return entry[0] if len(entry) == 1 else tuple(entry)
+    if isinstance(entry, str) and entry:
+        return entry
+    raise ValueError(f"{what} = {entry!r} must be a file name, or a list of file names (the exposures of one state)")
+
+
+def exposures(entry) -> tuple[str, ...]:
+    """The files of one view's image in a :class:`RigFile` (a file, or the tuple of its exposures)."""
+    return entry if isinstance(entry, tuple) else (entry,)
