@@ -476,4 +476,4 @@ def test_several_exposures_per_view_are_averaged(written, tmp_path):
         return float((scene.eps - truth).norm(dim=-1).pow(2).mean().sqrt())
 
     assert once.measured["image_noise"][0] is None
-    assert error(many) < 0.8 * error(once), (error(many), error(once))
+    assert error(many) < 0.65 * error(once), (error(many), error(once))  # measured 0.50x: 1 / sqrt(4)

@@ -23,7 +23,7 @@ def realistic():
 
 def image_term(scene, **settings):
     batches = RayBatcher(scene, None, 256, "all", 0.0, torch.Generator().manual_seed(0))
-    cfg = {"name": "images", "flow_warmup": 0.0, "highpass_px": 8.0, "interpolation": "bicubic", "flow_weight": 0.0,
+    cfg = {"name": "images", "flow_warmup": 0.0, "highpass_px": 8.0, "flow_weight": 0.0,
            **settings}
     return DATA_TERMS.build(cfg).setup(scene, batches, 100)
 

@@ -19,6 +19,7 @@ from nerif.data import Scene
 from nerif.losses import deflection_terms
 from nerif.losses.images import bandpass, cell_origin, cell_weights, photometric_residual, photometric_scale
 from nerif.registry import Registry
+from nerif.sensing.imaging import bspline_coefficients
 from nerif.solvers.batches import RayBatcher
 
 DATA_TERMS = Registry("data term", package="nerif.solvers")
@@ -79,7 +80,8 @@ class ImageTerm(DeflectionTerm):
     """The photometric residual ``I_ref(x + u(x)) - I_dist(x)`` at every image pixel of random patches of the ray
     grid: the field's deflections are rendered at the ``patch x patch`` rays of a patch, turned into displacements
     [image px] through the rig geometry, interpolated bilinearly inside each cell of 2 x 2 rays to its ``b x b``
-    image pixels (``b``: rays are ``b`` image pixels apart), and the reference image is sampled there (bicubic).
+    image pixels (``b``: rays are ``b`` image pixels apart), and the reference image is sampled there (its cubic
+    B-spline by default).
     A patch of k x k rendered rays scores (k - 1)^2 cells: with k = 4, 2.25x the pixels of separate cells for the
     same rendering, and the residual's noise, not its cost, is what limits it. No optical flow enters it,
     except for the first ``flow_warmup`` share of the iterations, which fit the flow's deflections to start
@@ -89,7 +91,8 @@ class ImageTerm(DeflectionTerm):
         flow_warmup: share of the iterations that fit the flow term first (0: images from the start).
         highpass_px: compare the images less their Gaussian blur of this width [px] (a smooth brightness
             change between the exposures, the flame's own light); null: as they are.
-        interpolation: of the reference image: ``bicubic`` or ``bilinear``.
+        interpolation: of the reference image: ``bspline`` (the cubic B-spline through its pixels), ``bicubic``
+            (PyTorch's cubic convolution) or ``bilinear`` (:func:`nerif.sensing.imaging.sample`).
         patch: rays per side of a patch (at least 2); a step draws ``rays_per_batch / patch^2`` patches.
         lowpass_px: blur both images by a Gaussian of this width [px] first (sensor noise); null: none.
         flow_weight: after the warm-up, the flow term on the same rays is added with this weight (0: images alone).
@@ -103,14 +106,14 @@ class ImageTerm(DeflectionTerm):
 
     fitted = "images"
 
-    def __init__(self, flow_warmup: float = 0.25, highpass_px: Optional[float] = 8.0, interpolation: str = "bicubic",
+    def __init__(self, flow_warmup: float = 0.25, highpass_px: Optional[float] = 8.0, interpolation: str = "bspline",
                  patch: int = 2, lowpass_px: Optional[float] = None, flow_weight: float = 1.0, shake_lr: float = 0.0):
         if not 0.0 <= flow_warmup < 1.0:
             raise ValueError(f"data_term.flow_warmup={flow_warmup}: a share of the iterations within [0, 1)")
         if highpass_px is not None and not highpass_px >= 0:
             raise ValueError(f"data_term.highpass_px={highpass_px}: a width in pixels (or null)")
-        if interpolation not in ("bicubic", "bilinear"):
-            raise ValueError(f"data_term.interpolation must be bicubic or bilinear, got '{interpolation}'")
+        if interpolation not in ("bspline", "bicubic", "bilinear"):
+            raise ValueError(f"data_term.interpolation must be bspline, bicubic or bilinear, got '{interpolation}'")
         if not (isinstance(patch, int) and patch >= 2):
             raise ValueError(f"data_term.patch={patch}: rays per side of a patch, at least 2")
         self.flow_warmup, self.highpass_px, self.mode, self.k = float(flow_warmup), highpass_px, interpolation, patch
@@ -147,8 +150,10 @@ class ImageTerm(DeflectionTerm):
                 patch[sl][inside, j] = lut[(pixel + dr * cam.width + dc)[inside]]
             A = scene.gain[sl] * (scene.scale / im.camera.binning)  # image px per unit of sigma
             ref = bandpass(im.reference, self.highpass_px, self.lowpass_px)
+            if self.mode == "bspline":  # sampled through its spline's coefficients (:func:`~nerif.sensing.imaging.sample`)
+                ref = bspline_coefficients(ref)
             gain.append(A.float())
-            scale.append(torch.full((len(A),), photometric_scale(ref, A), device=device))
+            scale.append(torch.full((len(A),), photometric_scale(ref, A, mode=self.mode), device=device))
             # the views one above the other, MARGIN rows of border between them: one sampling call per step
             refs.append(torch.nn.functional.pad(ref[None, None], (0, 0, MARGIN, MARGIN), mode="replicate")[0, 0])
             dists.append(torch.nn.functional.pad(bandpass(im.distorted, self.highpass_px, self.lowpass_px)[None, None],
