@@ -137,6 +137,7 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("mask.threshold=abc", "mask.threshold=abc: a number (its default: 0.001)"),
     ("train.progress=yes", "train.progress=yes: true or false"),
     ("field.hash_levels=0", "field.hash_levels=0 must be a whole number of at least 1"),  # it crashed the kernel
+    ("data.sensing=realistic flow.winsize=0", "flow=farneback with flow.winsize=0 cannot measure a known shift"),
     ("train.lr=0", "train.lr=0: the peak learning rate, a positive number"),
     ("train.betas=[1.5,0.9]", "train.betas=[1.5, 0.9]: Adam's two decay rates, each within [0, 1)"),
     ("train.lr_min=1", "train.lr_min=1: the learning rate's floor, within [0, train.lr = 0.005]"),

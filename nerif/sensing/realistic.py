@@ -27,7 +27,7 @@ from nerif.renderers.voxel import voxel_deflection
 from nerif.sensing.burner import DARK, burner_pixels
 from nerif.sensing.displacement import deflection_to_displacement, displacement_to_deflection
 from nerif.sensing.emission import flame_light
-from nerif.sensing.flow import FLOW
+from nerif.sensing.flow import FLOW, check_flow
 from nerif.sensing.measurement import MEASUREMENT
 from nerif.sensing.imaging import add_noise, diffraction_blur, resample, to_uint8, warp
 from nerif.sensing.models import SENSING
@@ -107,6 +107,7 @@ def check_settings(camera: Camera, rig_binning: int, pattern: dict, flow: dict, 
                    ) -> None:
     """One sentence for a setting of :func:`realistic` that cannot run (``camera``: a training camera)."""
     PATTERNS.get(pattern["name"]), FLOW.get(flow["name"])
+    check_flow(flow)  # settings that cannot measure say so here, not as an empty view each after the rendering
     if noise_variance < 0:
         raise ValueError(f"noise variance must be >= 0, got {noise_variance}")
     if not luminosity >= 0 or not gain_drift > -1 or not gain_ramp > -1 or not shake_px >= 0 or \
