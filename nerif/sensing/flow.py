@@ -167,7 +167,7 @@ TEST_TOLERANCE_PX = 0.2  # the median error a flow may make on it
 
 
 def check_flow(flow: dict) -> None:
-    """One sentence, before any image is read, where the settings of ``flow`` (a :data:`FLOW` config) cannot
+    """One sentence, before the flow runs on any view, where the settings of ``flow`` (a :data:`FLOW` config) cannot
     measure: the flow must find a known shift (:data:`TEST_SHIFT_PX`) of a random texture (128 x 128 px, blurred
     over 1.5 px) within :data:`TEST_TOLERANCE_PX` in the median. Settings OpenCV refuses, and settings it takes but
     that measure nothing (a window of 0 px, no pyramid level), both say so here rather than as an empty view each."""
