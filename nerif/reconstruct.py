@@ -140,7 +140,8 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
         metrics = write_outputs(solver, scene, out_dir, losses)
         about = dict(about or {})
         earlier = about.pop("warnings", [])
-        metrics["warnings"] = list(dict.fromkeys(earlier + rig_warnings + metrics.get("warnings", []) + records.messages))
+        said = earlier + rig_warnings + metrics.get("warnings", []) + records.messages
+        metrics["warnings"] = list(dict.fromkeys(said))
         metrics.update(setup_time_s=setup_s, cpu_threads=torch.get_num_threads(),
                        device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
         metrics.update(threads.report() if threads is not None else {})

@@ -21,7 +21,7 @@ PITCH_UM = (0.5, 100.0, lambda v: f"a pitch in millimetres? {v} mm is {v * 1e3:g
 DISTANCE_MM = (10.0, 1.0e5, lambda v: f"a distance in metres? {v} m is {v * 1e3:g} mm" if v < 10
                else f"a distance in micrometres? {v} um is {v * 1e-3:g} mm")
 F_NUMBER = (0.5, 256.0, lambda v: "f-numbers run from about 1 to 64 (the focal length over the aperture's diameter)")
-MAX_DISTORTION = 0.25  # the most a lens's distortion moves an image's corner, as a share of its distance from the centre
+MAX_DISTORTION = 0.25  # the most a lens's distortion moves an image's corner (a share of its distance from the centre)
 
 
 def plausible(value: float, limits: tuple, what: str) -> float:
@@ -78,8 +78,8 @@ def calibration_entry(values: dict, name: str, where: str) -> dict:
     dist = np.pad(dist, (0, 5 - dist.size))
     moved = corner_distortion(K, dist, size)
     if not moved <= MAX_DISTORTION:
-        raise ValueError(f"{where}: 'dist_coeffs' {dist.tolist()} move the image's corner by {100 * moved:.0f} % of its "
-                         f"distance from the centre; lenses move it by a few per cent (at most "
+        raise ValueError(f"{where}: 'dist_coeffs' {dist.tolist()} move the image's corner by {100 * moved:.0f} % of "
+                         f"its distance from the centre; lenses move it by a few per cent (at most "
                          f"{100 * MAX_DISTORTION:.0f} %): check k1, k2, k3 (OpenCV's, for coordinates divided by the "
                          "focal length)")
     c.update(size=size, K=K, dist=dist, rvec=rvec, tvec=numbers("tvec", 3))

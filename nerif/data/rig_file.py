@@ -11,8 +11,8 @@ from typing import Optional
 import numpy as np
 import yaml
 
-from nerif.data.calibration import (DISTANCE_MM, F_NUMBER, FOCAL_MM, PITCH_UM, calibrated_camera, calibration_entry, plausible,
-                                    read_calibration)
+from nerif.data.calibration import (DISTANCE_MM, F_NUMBER, FOCAL_MM, PITCH_UM, calibrated_camera, calibration_entry,
+                                    plausible, read_calibration)
 from nerif.geometry import Camera, ProbeBox, arc_rig
 from nerif.physics import Ambient
 

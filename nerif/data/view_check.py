@@ -112,7 +112,8 @@ def bad_views(scene: Scene) -> dict[int, str]:
                           "views' median): a distorted image taken without the flame, or the reference again?")
             elif rms[v] > WILD * typical:
                 why[v] = (f"its displacements are wild ({rms[v]:.3f} px RMS against {typical:.3f} px, the other "
-                          "views' median): its flow failed (look at its images: a camera knocked, an image of another view?)")
+                          "views' median): its flow failed (look at its images: a camera knocked, an image of another "
+                          "view?)")
     rest = [v for v in rest if v not in why]
     evidence = hot_evidence(scene, per_view=True)
     if len(rest) >= 3 and sum(evidence[v] < -SIGN for v in rest) >= 2 * len(rest) / 3:
