@@ -173,9 +173,10 @@ class IterativeSolver:
         faces, crossed = ambient_faces(setting, self.scene, masks, min_cover, fallback)
         self.report.update(ambient_faces=faces, flame_crosses_faces=crossed)
         if setting == "auto" and len(crossed) == 6:
-            log.warning("the visual hull covers every face of the probe box (noisy or smoothed deflections?): sigma "
-                        "= 0 on %s (loss.ambient_fallback); set loss.ambient_faces to the faces known to be "
-                        "ambient", ", ".join(faces))
+            log.warning("the visual hull covers every face of the probe box (the flame's warm gas reaching every "
+                        "face, or masks inflated by noisy or smoothed deflections): sigma = 0 on %s "
+                        "(loss.ambient_fallback); widen the probe box where the flame reaches a face, else set "
+                        "loss.ambient_faces to the faces known to be ambient", ", ".join(faces))
         if crossed:
             log.info("the flame crosses the probe box at %s (visual hull); ambient faces: %s%s", ", ".join(crossed),
                      ", ".join(faces) or "none", " (auto)" if setting == "auto" else "")
