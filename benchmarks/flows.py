@@ -5,7 +5,7 @@
 
 Each estimator measures every view through the measurement stage (``nerif.sensing.measurement``, as a run does:
 saturation, occlusion, the shake taken off, outliers rejected) on the capture's auto ray grid. Its displacements
-are compared with ``true_disp.npz`` block-averaged to the same grid, on the pixels the stage kept, less 5 rays of
+are compared with ``true_disp.npz`` (less its ``shake``, where it records one) block-averaged to the same grid, on the pixels the stage kept, less 5 rays of
 border: the RMS error [px of the full sensor], the RMS error over the RMS displacement, the gain (the least-squares
 scale of the estimate on the truth: above 1, it overestimates) and the wall time of the stage a view. The
 estimators are ``flow=`` configs: Farneback as shipped (``normalise_px=auto``) and without normalising, DIS
@@ -55,7 +55,10 @@ def score(u: np.ndarray, valid: np.ndarray, truth: np.ndarray) -> dict:
 
 def capture_rows(root: Path, views: list[int] | None) -> list[dict]:
     rig = read_rig(root)
-    truth = np.load(root / "true_disp.npz")["disp"]  # (V, 2, H, W) [px of the full sensor]
+    exact = np.load(root / "true_disp.npz")
+    truth = exact["disp"]  # (V, 2, H, W) [px of the full sensor]
+    if "shake" in exact.files:  # the camera's shift between the exposures, which the stage takes off
+        truth = truth - exact["shake"][:, :, None, None]
     full, cameras, roi, rays = rig_geometry(rig, "auto", "cpu")
     distorted, references = capture_files(rig)
     quiet = outside_the_box(cameras, rays)
