@@ -13,8 +13,8 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import OverrideParseException
 from omegaconf import DictConfig
 
-from nerif.app import run
-from nerif.configs import check_kinds, config_dir
+from nerif.app import run, unexpected
+from nerif.configs import check_kinds, config_dir, group_choices
 from nerif.io.export import write_json
 from nerif.io.summary import FAILED
 from nerif.solvers import DivergenceError, Interrupted
@@ -34,10 +34,8 @@ def check_overrides(cfg: DictConfig, overrides) -> None:
     """One sentence for a command-line setting of the wrong kind (:func:`nerif.configs.check_kinds`, against the
     config of the same config-group choices), or one the run ignores: the synthetic rig's (``rig.*``) with
     recorded data, whose cameras come from the data's own files."""
-    groups = {p.name for p in config_dir().iterdir() if p.is_dir()}
-    choices = [o for o in overrides if o.lstrip("+~").split("=")[0] in groups]
     try:
-        defaults = hydra.compose(config_name="config", overrides=choices)
+        defaults = hydra.compose(config_name="config", overrides=group_choices(overrides))
     except Exception as e:  # a launcher that left Hydra's config search uninitialised: the components check
         logging.getLogger("nerif").debug("the settings' kinds are not checked here: %s", e)
         defaults = None
@@ -69,14 +67,6 @@ def unreadable_override(args: list[str]) -> Optional[str]:
     return None
 
 
-def unexpected(e: BaseException) -> str:
-    """One sentence for an exception nerif did not turn into one where it arose (OpenCV's, torch's, a TypeError
-    from a value of the wrong kind): its type and first line, and how to see where it arose."""
-    said = getattr(e, "err", None) or str(e)  # cv2.error: its short message
-    first = next((ln.strip() for ln in str(said).splitlines() if ln.strip()), "")
-    return f"nerif stopped on {type(e).__name__}: {first or 'no message'} (add debug=true to see where it arose)"
-
-
 def stop(message: str) -> float:
     """Log ``message`` as the run's one sentence and end it: a multirun's job is listed as failed and the sweep
     goes on; a single run exits with status 2."""
@@ -106,7 +96,7 @@ def main(cfg: DictConfig) -> float:
     except Exception as e:  # anything else is one sentence too; the traceback with debug=true
         if cfg.get("debug"):
             raise
-        return stop(unexpected(e))
+        return stop(unexpected(e, "debug=true"))
     return metrics.get("temperature_rmse_K", metrics["deflection_rmse"])
 
 

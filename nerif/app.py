@@ -61,6 +61,14 @@ def retain_freed_memory() -> bool:
     return ok
 
 
+def unexpected(e: BaseException, debug: str) -> str:
+    """One sentence for an exception nerif did not turn into one where it arose (OpenCV's, torch's, a TypeError
+    from a value of the wrong kind): its type and first line, and the flag (``debug``) that shows where it arose."""
+    said = getattr(e, "err", None) or str(e)  # cv2.error: its short message
+    first = next((ln.strip() for ln in str(said).splitlines() if ln.strip()), "")
+    return f"nerif stopped on {type(e).__name__}: {first or 'no message'} (add {debug} to see where it arose)"
+
+
 def check_outside_capture(cfg: DictConfig, out_dir: Path) -> None:
     """One sentence where the run would write into the capture folder it reads: its images (``slices.png``, ...)
     would then be read as unlisted views by the next run."""

@@ -87,6 +87,13 @@ def check_complete(cfg: DictConfig) -> None:
                          f"command line, e.g. {missing[0]}=...")
 
 
+def group_choices(overrides: Sequence[str]) -> list[str]:
+    """The config-group choices among command-line ``overrides`` (``data=capture``, ``+experiment=...``): the
+    config a setting's kind is read from (:func:`check_kinds`) is composed of these alone."""
+    groups = {p.name for p in config_dir().iterdir() if p.is_dir()}
+    return [o for o in overrides if o.lstrip("+~").split("=")[0] in groups]
+
+
 WORDS = ("auto", "all")  # words a numeric setting may take instead (threads=auto, train.views_per_batch=all)
 
 

@@ -23,7 +23,8 @@ import yaml
 
 from hydra.errors import HydraException
 
-from nerif.configs import check_complete, compose, group
+from nerif.app import unexpected
+from nerif.configs import check_complete, check_kinds, compose, group, group_choices
 from nerif.data import DATASETS
 from nerif.sequence import frames_of
 from nerif.data.rig_file import RIG_FILE, RIG_VERSION, read_rig
@@ -157,11 +158,11 @@ def target_folder(path: Path, overwrite: bool) -> Path:
     return path
 
 
-def check_space(folder: Path, cfg) -> None:
-    """One sentence, before rendering, where the disk holding ``folder`` lacks the room for the capture's images
-    (their raw size, 8-bit: PNG compresses noisy speckle little)."""
-    rig, frames = cfg.rig, frames_of(group(cfg, "data"))
-    images = int(rig.n_cameras) * (1 + (len(frames) if frames is not None else 1))
+def check_space(folder: Path, rig, n_frames: int) -> None:
+    """One sentence, before rendering, where the disk holding ``folder`` lacks the room for the images of a capture
+    of ``n_frames`` frames through ``rig`` (the ``rig`` config; their raw size, 8-bit: PNG compresses noisy speckle
+    little)."""
+    images = int(rig.n_cameras) * (1 + n_frames)
     need = images * int(rig.width_px) * int(rig.height_px)
     free = shutil.disk_usage(folder).free
     if need > free:
@@ -173,13 +174,15 @@ def write(path: Path, overrides: list[str], overwrite: bool = False) -> Path:
     """Render the scene of ``overrides`` and write it as a capture to ``path``, atomically: into a sibling
     folder first, which then takes the place of ``path`` (an interrupted write leaves ``path`` as it was)."""
     path = target_folder(path, overwrite)
-    cfg = compose(["data=synthetic", "data.sensing=realistic"] + list(overrides))
+    fixed = ["data=synthetic", "data.sensing=realistic"]
+    cfg = compose(fixed + list(overrides))
     check_complete(cfg)
+    check_kinds(cfg, compose(fixed + group_choices(overrides)), overrides)
     data = group(cfg, "data")
     frames = frames_of(data)
     parent = path.parent
     parent.mkdir(parents=True, exist_ok=True)
-    check_space(parent, cfg)
+    check_space(parent, cfg.rig, len(frames) if frames is not None else 1)
     staging = path.parent / f".{path.name}.writing"
     shutil.rmtree(staging, ignore_errors=True)
     try:
@@ -210,6 +213,7 @@ def main(argv=None) -> Path:
     ap.add_argument("path", help="the capture folder to write (created; it must be new or empty)")
     ap.add_argument("overrides", nargs="*", help="config overrides of the synthetic scene (data.sensing is realistic)")
     ap.add_argument("--overwrite", action="store_true", help="replace a folder that holds something, whole")
+    ap.add_argument("--debug", action="store_true", help="an unexpected error's traceback (else one sentence)")
     args = ap.parse_intermixed_args(argv)  # --overwrite anywhere on the line
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     try:
@@ -224,6 +228,11 @@ def main(argv=None) -> Path:
     except KeyboardInterrupt:
         print(f"nerif.write_capture: interrupted; {args.path} is as it was", file=sys.stderr, flush=True)
         sys.exit(130)
+    except Exception as e:  # anything else is one sentence too (a value of the wrong kind, OpenCV's, torch's)
+        if args.debug:
+            raise
+        print(f"nerif.write_capture: error: {unexpected(e, '--debug')}", file=sys.stderr, flush=True)
+        sys.exit(2)
     rig = read_rig(root)
     views, n = rig.n_views, len(rig.frames) if len(rig.frames) > 1 else 0
     what = f"{n} frame{'s' * (n != 1)} of {views} views" if n else f"{views} views"

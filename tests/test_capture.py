@@ -477,3 +477,16 @@ def test_several_exposures_per_view_are_averaged(written, tmp_path):
 
     assert once.measured["image_noise"][0] is None
     assert error(many) < 0.65 * error(once), (error(many), error(once))  # measured 0.50x: 1 / sqrt(4)
+
+
+def test_a_pixel_clipped_in_one_exposure_stays_clipped_in_the_mean(tmp_path):
+    """Averaging K exposures must not hide a clipped pixel below full scale, where the saturation step looks."""
+    from nerif.data.capture_images import read_exposures
+
+    a = np.full((8, 10), 100, np.uint8)
+    b = a.copy()
+    b[3, 4] = 255
+    for name, img in (("a.png", a), ("b.png", b)):
+        _write(tmp_path / name, img)
+    (mean,), (noise,) = read_exposures([(tmp_path / "a.png", tmp_path / "b.png")], (10, 8))
+    assert mean[3, 4] == 1.0 and mean[0, 0] == pytest.approx(100 / 255) and noise > 0

@@ -107,3 +107,24 @@ def test_a_dirty_capture_is_written_and_its_burner_read_back_as_occluded(tmp_pat
     truth = DATASETS.build(group(compose(["data.sensing=realistic", *SMALL, *dirt]), "data"))
     true = truth.sensing["occluded_true"]
     assert np.all(true > 0.02) and np.all(np.abs(np.asarray(found) - true) < 0.5 * true + 0.01), (found, true)
+
+
+def test_a_value_of_the_wrong_kind_and_a_bug_are_one_sentence(tmp_path, capsys, monkeypatch):
+    """Issue 38: write_capture caught only its own errors; a word where a number goes ended in a TypeError
+    traceback. The kind is named before rendering; anything else is one sentence, its traceback with --debug."""
+    with pytest.raises(SystemExit) as e:
+        main([str(tmp_path / "a"), *SMALL, "pattern.spacing_px=abc"])
+    assert e.value.code == 2 and "pattern.spacing_px=abc: a number (its default: 4.0)" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists()
+
+    def broken(*args, **kwargs):
+        return {}["missing"]
+
+    monkeypatch.setattr("nerif.write_capture.write_capture", broken)
+    with pytest.raises(SystemExit) as e:
+        main([str(tmp_path / "b"), *SMALL])
+    said = capsys.readouterr().err
+    assert e.value.code == 2 and "nerif stopped on KeyError: 'missing' (add --debug to see where it arose)" in said
+    assert not (tmp_path / "b").exists()
+    with pytest.raises(KeyError):
+        main([str(tmp_path / "c"), *SMALL, "--debug"])

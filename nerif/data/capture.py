@@ -157,14 +157,17 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
         raise ValueError(f"frame {frame}: {rig.path} lists {len(rig.frames)} frame(s)")
     distorted, references = capture_files(rig, frame)
     flame = [rig.root / f for f in rig.flame_only or ()]
-    check_images([p for files in distorted + references for p in files] + flame, rig.sensor_px)  # one bit depth
-    # for all, from the headers
+    files = [p for exposed in distorted + references for p in exposed]
+    check_images(files + flame, rig.sensor_px)  # one bit depth for all, from the headers
     full, cameras, roi, rays = rig_geometry(rig, binning, device)
-    held = heldout_views(heldout, len(cameras), "data.heldout") if heldout is not None else heldout_views(
-        list(rig.heldout) if rig.heldout is not None else [len(cameras) - 1], len(cameras), f"{rig.path}: heldout")
+    if heldout is not None:
+        held = heldout_views(heldout, len(cameras), "data.heldout")
+    else:
+        held = heldout_views([len(cameras) - 1] if rig.heldout is None else list(rig.heldout), len(cameras),
+                             f"{rig.path}: heldout")
     prior = sigma_prior(rig, rig.ambient)
     truth_T = read_truth(truth, rig.box) if truth is not None else None
-    lossy = lossy_images([p for files in distorted + references for p in files])
+    lossy = lossy_images(files)
     if lossy:
         log.warning("%s", lossy)
     (images, noise), (refs, ref_noise) = read_exposures(distorted, rig.sensor_px), reference_images(references,

@@ -154,11 +154,16 @@ def exposure_noise(stack: np.ndarray) -> Optional[float]:
 
 def read_exposures(views: list[tuple[Path, ...]], sensor_px) -> tuple[list[np.ndarray], list[Optional[float]]]:
     """Each view's image, the mean of its exposures (the tuple of its files), as (H, W) floats in [0, 1] of full
-    scale, and that mean's noise (:func:`exposure_noise`; None for one exposure). A view's exposures are decoded
-    together, the views one after another."""
+    scale, and that mean's noise (:func:`exposure_noise`; None for one exposure). A pixel at full scale in any
+    exposure stays at full scale in the mean: what it recorded there is clipped, and the saturation step must see it.
+    A view's exposures are decoded together, the views one after another."""
     images, noise = [], []
     for files in views:
         stack = np.stack(read_images(list(files), sensor_px))
-        images.append(stack.mean(0) if len(stack) > 1 else stack[0])
+        mean = stack[0]
+        if len(stack) > 1:
+            mean = stack.mean(0)
+            mean[(stack >= 1.0).any(0)] = 1.0
+        images.append(mean)
         noise.append(exposure_noise(stack))
     return images, noise

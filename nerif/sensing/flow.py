@@ -170,7 +170,7 @@ def check_flow(flow: dict) -> None:
     """One sentence, before the flow runs on any view, where the settings of ``flow`` (a :data:`FLOW` config) cannot
     measure: the flow must find a known shift (:data:`TEST_SHIFT_PX`) of a random texture (128 x 128 px, blurred
     over 1.5 px) within :data:`TEST_TOLERANCE_PX` in the median. Settings OpenCV refuses, and settings it takes but
-    that measure nothing (a window of 0 px, no pyramid level), both say so here rather than as an empty view each."""
+    that measure nothing (a window of 0 or 1 px, no iteration), both say so here rather than as an empty view each."""
     rng = np.random.default_rng(0)
     reference = cv2.GaussianBlur(rng.random((128, 128)).astype(np.float32), (0, 0), 1.5)
     reference = 0.5 + 0.35 * (reference - reference.mean()) / reference.std()
