@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import os
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -66,6 +67,17 @@ class WarningRecords(logging.Handler):
     def __exit__(self, *exc) -> None:
         warnings.showwarning = self._show
         logging.getLogger("nerif").removeHandler(self)
+
+
+def peak_memory_gib() -> Optional[float]:
+    """The process's peak resident memory so far [GiB] (the host's, with everything it read), None where the system
+    does not say (Windows)."""
+    try:
+        import resource
+    except ImportError:
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**30 if sys.platform == "darwin" else peak / 2**20  # bytes on macOS, KiB on Linux
 
 
 def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Optional[int] = None,
@@ -147,6 +159,7 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
         metrics.update(threads.report() if threads is not None else {})
         if device.type == "cuda":
             metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
+        metrics["peak_memory_gib"] = peak_memory_gib()
         metrics["total_time_s"] = time.perf_counter() - t_start
         metrics.update(about)
         write_json(metrics, out_dir / "metrics.json")

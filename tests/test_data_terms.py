@@ -83,11 +83,13 @@ def test_training_on_the_images_runs_and_lowers_the_image_misfit(realistic):
 
 
 def test_a_flow_weight_adds_the_flows_misfit_on_the_same_rays(realistic):
-    """``flow_weight`` adds ``w * mean |eps - eps_flow|^2`` over the rays already rendered: with it large, the
-    flow's own deflections cost less than the truth, which the images alone prefer."""
+    """``flow_weight`` adds ``w (4 / b)^2 mean |eps - eps_flow|^2`` over the rays already rendered (``b`` image pixels
+    between rays: the images hold more where more pixels lie between the rays): with it large, the flow's own
+    deflections cost less than the truth, which the images alone prefer."""
     cfg, scene = realistic
     ph = PHANTOMS.build(group(cfg, "phantom"))
-    alone, weighted = image_term(scene), image_term(scene, flow_weight=10.0)
+    assert scene.image_block() == 10
+    alone, weighted = image_term(scene), image_term(scene, flow_weight=10.0 * (10 / 4) ** 2)
     batch = alone.draw(0)
     eps = voxel_deflection(torch.as_tensor(ph.delta, dtype=torch.float32), ph.box, batch.origins, batch.dirs)
     truth, flow = eps / scene.scale, scene.observed[batch.index]
@@ -97,7 +99,8 @@ def test_a_flow_weight_adds_the_flows_misfit_on_the_same_rays(realistic):
 
     assert cost(alone, truth) < cost(alone, flow)
     assert cost(weighted, flow) < cost(weighted, truth)
-    misfit = float(((truth - flow) ** 2).sum(-1).mean())
+    w = weighted.flow.ray_weight[batch.index]  # each view's noise weight (its measured noise)
+    misfit = float((w * ((truth - flow) ** 2).sum(-1)).mean())
     assert cost(weighted, truth) == pytest.approx(cost(alone, truth) + 10.0 * misfit, rel=1e-5)
 
 
@@ -184,3 +187,55 @@ def test_a_shake_measured_wrong_is_refined_by_the_images_where_the_field_explain
     assert float((refined[0] - measured[0]).abs().max()) < 0.03, (refined[0], measured[0])
     assert float((refined[1:] - measured[1:]).abs().max()) < 0.03
     assert image_term(scene, shake_lr=0.0).parameter_groups() == [] and image_term(scene, shake_lr=0.0).shakes_px() is None
+
+
+def test_a_noisier_view_counts_less_in_both_terms(realistic):
+    """Each view's weight is ``1 / sigma_v^2`` over its mean (its measured noise, ``noise``): with one view's noise
+    read twice the others', it counts a quarter of theirs, in the flow term and in the image term alike; the image
+    term's weights keep their sum (its size beside the flow term); with ``noise_weighted=false`` all count alike."""
+    import dataclasses
+
+    from nerif.solvers.data_terms import noise_weights, view_scales
+
+    _, scene = realistic
+    noise = [0.01] * scene.n_views
+    noise[1] = 0.02
+    noisy = dataclasses.replace(scene, measured={**scene.measured, "noise": noise})
+    w = noise_weights(noisy)
+    assert float(w[1] / w[0]) == pytest.approx(0.25) and float(w.mean()) == pytest.approx(1.0)
+    term = image_term(noisy, flow_weight=1.0)
+    assert torch.allclose(term.flow.view_weight, w)
+    scales = torch.stack([term.scale[scene.view_slice(v)][0] for v in range(scene.n_views)]).double()
+    plain = torch.stack([image_term(noisy, noise_weighted=False).scale[scene.view_slice(v)][0]
+                         for v in range(scene.n_views)]).double()
+    assert float(scales[0] / scales[1]) == pytest.approx(0.25, rel=1e-4)  # its residuals count a quarter
+    assert float((1 / scales).sum()) == pytest.approx(float((1 / plain).sum()), rel=1e-4)
+    assert image_term(noisy, noise_weighted=False).flow.view_weight is None
+    assert torch.allclose(view_scales([2.0, 4.0]), torch.tensor([2.0, 4.0], dtype=torch.float64))
+
+
+def test_a_step_compares_the_same_number_of_image_pixels_at_two_binnings(realistic, monkeypatch):
+    """Issue 39: with ``pixels_per_cell``, a step compares that many image pixels per cell however many pixels a ray
+    spans (rays 10 and 20 image pixels apart: 100 and 400 a cell), so its cost does not grow with the camera's
+    resolution; every pixel of a cell still counts on average (the mean over draws is the full cell's misfit)."""
+    import nerif.solvers.data_terms as data_terms
+
+    cfg, coarse = realistic
+    fine = DATASETS.build(group(tiny_config(*REALISTIC[:2], "data.sensor.image_binning=2", REALISTIC[3]), "data"))
+    assert (coarse.image_block(), fine.image_block()) == (10, 20)
+    compared = []
+    residual = data_terms.photometric_residual
+    monkeypatch.setattr(data_terms, "photometric_residual", lambda ref, dist, x, *a: compared.append(len(x))
+                        or residual(ref, dist, x, *a))
+    for scene in (coarse, fine):
+        for m in (None, 64):
+            term = image_term(scene, pixels_per_cell=m)
+            batch = term.draw(0)
+            term.terms({"d": scene.observed[batch.index]}, batch, 0)
+    cells = 64  # 256 rays in patches of 2 x 2
+    assert compared == [cells * 100, cells * 64, cells * 400, cells * 64]
+    term = image_term(fine, pixels_per_cell=64)
+    batch = term.draw(0)
+    full = float(image_term(fine, pixels_per_cell=None).terms({"d": fine.observed[batch.index]}, batch, 0)["d"])
+    drawn = [float(term.terms({"d": fine.observed[batch.index]}, batch, 0)["d"]) for _ in range(40)]
+    assert abs(np.mean(drawn) - full) < 0.03 * full, (np.mean(drawn), full)

@@ -4,24 +4,31 @@ import pytest
 import torch
 
 from nerif.sensing.flow import FLOW
-from nerif.sensing.imaging import diffraction_blur, warp
+from nerif.sensing.imaging import bspline_coefficients, diffraction_blur, sample
 from nerif.sensing.patterns import PATTERNS
 
 
-@pytest.mark.parametrize("flow,pattern", [("farneback", "poisson_disk"), ("farneback", "wavelet_noise"),
-                                          ("dis", "poisson_disk")])
-def test_optical_flow_recovers_a_known_smooth_displacement(flow, pattern):
+@pytest.mark.parametrize("flow,pattern,bound,gain", [("farneback", "poisson_disk", 0.04, 0.02),
+                                                     ("farneback", "wavelet_noise", 0.05, 0.02),
+                                                     ("dis", "poisson_disk", 0.08, 0.06)])
+def test_optical_flow_recovers_a_known_smooth_displacement(flow, pattern, bound, gain):
+    """A background moved by a smooth field (0.8 px peak, through its cubic B-spline: no interpolation bias of its
+    own), both images blurred alike. Measured: Farneback 0.025 px (Poisson disks) and 0.036 px (wavelet noise) RMS
+    error, gain 0.995 and 0.994; DIS 0.065 px, gain 1.043 (it overestimates smooth fields and underestimates a
+    flame's sharp ones: 0.74 on the shared capture, ``benchmarks/flows.py``)."""
     H, W = 240, 320
-    background = torch.as_tensor(PATTERNS.build({"name": pattern}, height=H, width=W, seed=1))
-    r, c = torch.meshgrid(torch.arange(H, dtype=torch.float32), torch.arange(W, dtype=torch.float32), indexing="ij")
+    background = torch.as_tensor(PATTERNS.build({"name": pattern}, height=H, width=W, seed=1), dtype=torch.float64)
+    r, c = torch.meshgrid(torch.arange(H, dtype=torch.float64), torch.arange(W, dtype=torch.float64), indexing="ij")
     u = torch.stack([0.8 * torch.sin(2 * np.pi * r / 160) * torch.cos(2 * np.pi * c / 200),
                      0.6 * torch.cos(2 * np.pi * c / 150)], -1)
-    reference, distorted = diffraction_blur(background, 2.1), diffraction_blur(warp(background, u), 2.1)
+    moved = sample(bspline_coefficients(background), (torch.stack([c, r], -1) + u).reshape(-1, 2), "bspline")
+    reference, distorted = (diffraction_blur(x.float(), 2.1) for x in (background, moved.reshape(H, W)))
     est = FLOW.build({"name": flow}, distorted=distorted.numpy(), reference=reference.numpy())
-    err = (est - u.numpy())[20:-20, 20:-20]
-    rms = float(np.sqrt((err**2).sum(-1).mean()))
-    assert rms < 0.1, rms
-    assert float(np.sqrt((u.numpy() ** 2).sum(-1).mean())) > 5 * rms  # the displacement itself is well above it
+    e, t = est[20:-20, 20:-20], u.numpy()[20:-20, 20:-20]
+    rms = float(np.sqrt(((e - t) ** 2).sum(-1).mean()))
+    assert rms < bound, rms
+    assert abs(float((e * t).sum() / (t * t).sum()) - 1) < gain
+    assert float(np.sqrt((t ** 2).sum(-1).mean())) > 5 * rms  # the displacement itself is well above it
 
 
 def test_unknown_dis_preset_is_named():

@@ -1,14 +1,18 @@
 """The data term: misfit of rendered to observed deflections, per gradient operator, and their weighted sum."""
 from __future__ import annotations
 
-from typing import Mapping
+from typing import Mapping, Optional
 
 import torch
 
 
-def deflection_terms(eps: Mapping[str, torch.Tensor], eps_obs: torch.Tensor) -> dict:
-    """Operator name -> mean over rays of ``|eps_op - eps_obs|^2``; (R, 3) each, normalised units."""
-    return {name: ((e - eps_obs) ** 2).sum(-1).mean() for name, e in eps.items()}
+def deflection_terms(eps: Mapping[str, torch.Tensor], eps_obs: torch.Tensor,
+                     weight: Optional[torch.Tensor] = None) -> dict:
+    """Operator name -> mean over rays of ``|eps_op - eps_obs|^2``, each ray's times its ``weight`` (R,) where
+    given; (R, 3) each, normalised units."""
+    if weight is None:
+        return {name: ((e - eps_obs) ** 2).sum(-1).mean() for name, e in eps.items()}
+    return {name: (weight * ((e - eps_obs) ** 2).sum(-1)).mean() for name, e in eps.items()}
 
 
 def weighted_sum(terms: Mapping[str, torch.Tensor], weights: Mapping[str, float]) -> torch.Tensor:

@@ -65,6 +65,9 @@ def photometric_residual(reference: torch.Tensor, distorted: torch.Tensor, x: to
     return sample(reference, x.to(u.dtype) + u, mode) - observed
 
 
+SCALE_POINTS = 2**18  # points :func:`photometric_scale` averages over, at most
+
+
 def photometric_scale(reference: torch.Tensor, gain: torch.Tensor, step_px: float = 0.05, mode: str = "bicubic") -> float:
     """What one unit of squared residual is worth in squared deflection units: the mean squared change of the
     reference image per px^2 of displacement, averaged over the two directions, measured as the residual sees it
@@ -74,10 +77,15 @@ def photometric_scale(reference: torch.Tensor, gain: torch.Tensor, step_px: floa
     (px^2 per squared unit of deflection; ``gain``: (N, 2, 3) the displacement matrices of the view's rays), so
     that the image term's weight is the flow term's."""
     H, W = reference.shape
-    rows, cols = torch.meshgrid(torch.arange(2, H - 3, dtype=torch.float64, device=reference.device),
-                                torch.arange(2, W - 3, dtype=torch.float64, device=reference.device), indexing="ij")
-    x = torch.stack([cols.reshape(-1), rows.reshape(-1)], -1)
-    x = x + torch.rand(x.shape, generator=torch.Generator().manual_seed(0), dtype=x.dtype).to(x.device)
+    g = torch.Generator().manual_seed(0)
+    if (H - 5) * (W - 5) <= SCALE_POINTS:  # every pixel, moved off it at random
+        rows, cols = torch.meshgrid(torch.arange(2, H - 3, dtype=torch.float64),
+                                    torch.arange(2, W - 3, dtype=torch.float64), indexing="ij")
+        x = torch.stack([cols.reshape(-1), rows.reshape(-1)], -1) + torch.rand((rows.numel(), 2), generator=g,
+                                                                             dtype=torch.float64)
+    else:  # a large image: as many random points (the mean to 0.3 %), not a cost that grows with its pixels
+        x = torch.rand((SCALE_POINTS, 2), generator=g, dtype=torch.float64) * torch.tensor([W - 5.0, H - 5.0]) + 2
+    x = x.to(reference.device)
     ref = reference.double()
     base = sample(ref, x, mode)
     per_px2 = [float((sample(ref, x + step_px * x.new_tensor(e), mode) - base).pow(2).mean()) / step_px**2

@@ -14,12 +14,14 @@ import logging
 from dataclasses import dataclass, field
 from typing import Optional
 
+import cv2
 import numpy as np
 
 from nerif.registry import Registry
 from nerif.sensing.flame_light import without_flame_light
-from nerif.sensing.flow import estimate, texture_width
+from nerif.sensing.flow import estimate, texture_scale_px, texture_width
 from nerif.sensing.imaging import resample
+from nerif.sensing.noise import MIN_PIXELS, residual_noise
 from nerif.sensing.occlusion import local_contrast, occluded
 from nerif.sensing.saturation import TOP, saturated
 from nerif.sensing.shake import MIN_QUIET, rigid_shift
@@ -42,7 +44,10 @@ class ViewMeasurement:
         found: what was found (for ``metrics.json`` and the log): ``displacement_max_px``, ``valid_fraction``,
             ``shake_px`` (column, row) [px of the full sensor], the shares of the ray grid's pixels left out
             as ``saturated``, ``occluded`` (no texture in the reference), ``unmeasured`` (no estimate from the
-            flow) and ``rejected`` (outlier vectors), ``normalise_px`` (the flow's width) and
+            flow) and ``rejected`` (outlier vectors), ``normalise_px`` (the flow's width), ``flow_factor``
+            (:func:`shrink_factor`), ``noise``
+            (one exposure's noise [share of full scale] where the view sees no flame,
+            :func:`~nerif.sensing.noise.residual_noise`; None where too few pixels are usable) and
             :func:`images_compared`'s ``difference_rms`` and ``texture_ratio``.
         distorted: (H, W) the distorted image the flow compared (the flame's light taken off where it was
             recorded), what an image term fits.
@@ -59,6 +64,23 @@ class ViewMeasurement:
 def _on_grid(mask: np.ndarray, h: int, w: int) -> np.ndarray:
     """An image-grid mask -> the ray grid: a block is set where any of its pixels is."""
     return resample(mask.astype(np.float32), h, w) > 0
+
+
+def _on_image(mask: np.ndarray, H: int, W: int) -> np.ndarray:
+    """A ray-grid mask -> the images' grid: each pixel takes its block's (nearest) value."""
+    return cv2.resize(mask.astype(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST).astype(bool)
+
+
+def noise_of(distorted: np.ndarray, reference: np.ndarray, u_image: np.ndarray, valid: np.ndarray,
+             quiet: Optional[np.ndarray], width_px: float) -> Optional[float]:
+    """The images' noise [share of full scale] (:func:`~nerif.sensing.noise.residual_noise`) on the usable pixels
+    that see no flame (``quiet``), or on every usable pixel where too few do; ``valid``, ``quiet``: (h, w) bool on
+    the ray grid, ``u_image`` (H, W, 2) the flow on the images' grid, the shake included."""
+    H, W = reference.shape
+    where = valid & quiet if quiet is not None else valid
+    if int(where.sum()) * (H * W) < MIN_PIXELS * where.size:
+        where = valid
+    return residual_noise(distorted, reference, u_image, _on_image(where, H, W), width_px)
 
 
 def outside_reach(u: np.ndarray, valid: np.ndarray, quiet: Optional[np.ndarray]) -> Optional[float]:
@@ -83,7 +105,12 @@ def images_compared(distorted: np.ndarray, reference: np.ndarray, width_px: floa
     ref = float(np.median(local_contrast(r, width_px) if contrast is None else contrast))
     ratio = float(np.median(local_contrast(d, width_px))) / ref if ref > 0 else 1.0
     return {"difference_rms": float(np.sqrt(np.mean((d - r) ** 2))), "texture_ratio": ratio,
-            "clipped": float(np.mean((d >= TOP) | (r >= TOP)))}
+            "clipped": clipped_share(d, r)}
+
+
+def clipped_share(distorted: np.ndarray, reference: np.ndarray) -> float:
+    """The share of pixels at full scale in either exposure (H, W)."""
+    return float(np.mean((distorted >= TOP) | (reference >= TOP)))
 
 
 def _either(a: Optional[np.ndarray], b: Optional[np.ndarray]) -> Optional[np.ndarray]:
@@ -91,12 +118,51 @@ def _either(a: Optional[np.ndarray], b: Optional[np.ndarray]) -> Optional[np.nda
     return b if a is None else a if b is None else a | np.asarray(b, dtype=bool)
 
 
+TUNED_SCALE_PX = 1.45  # the texture's correlation length the flows' settings are tuned for (the shared captures')
+
+
+def shrink_factor(reference: np.ndarray, setting) -> int:
+    """How many times smaller the images are made for the flow: ``setting``, or for ``auto`` the texture's
+    correlation length (:func:`~nerif.sensing.flow.texture_scale_px`) over :data:`TUNED_SCALE_PX`, rounded down:
+    1 on the shared captures (1.45 px) and nerif's patterns (1.34-1.40 px), 2 on a 4x finer camera's images of the
+    same background (3.21 px: sigma error 0.089 with the flow alone, 0.153 on the images as they are). On the
+    Poisson-disk pattern enlarged k times (1.34, 2.06, 2.85, 3.65, 5.07 px for k = 1, 2, 3, 4, 6) a factor of
+    about k / 2 measures best (k = 4: 0.0058 px of error a pixel of the k = 1 grid with 2, 0.0097 with 3, 0.019 with
+    1; k = 3: 0.0081 with 1 and 0.0082 with 2)."""
+    if setting == "auto":
+        return max(1, int(texture_scale_px(reference) / TUNED_SCALE_PX))
+    if not (isinstance(setting, int) and setting >= 1):
+        raise ValueError(f"measure.flow_factor={setting!r}: a whole number (the images made that many times smaller "
+                         "for the flow; 1: as they are) or auto")
+    return setting
+
+
+def shrunk(image: np.ndarray, factor: int) -> np.ndarray:
+    """(H, W) -> (H // factor, W // factor) area means (the image itself for 1): a texture ``factor`` times finer in
+    pixels, the noise averaged down."""
+    if factor == 1:
+        return image
+    H, W = image.shape
+    return cv2.resize(np.float32(image), (max(W // factor, 1), max(H // factor, 1)), interpolation=cv2.INTER_AREA)
+
+
+def enlarged(a: np.ndarray, H: int, W: int) -> np.ndarray:
+    """A mask (h, w) bool (nearest) or a flow (h, w, 2) [px of that grid] (bilinear, scaled by the size ratio) on
+    shrunk images (:func:`shrunk`) brought to (H, W)."""
+    h, w = a.shape[:2]
+    if (h, w) == (H, W):
+        return a
+    if a.dtype == bool:
+        return cv2.resize(a.astype(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST).astype(bool)
+    return cv2.resize(a, (W, H), interpolation=cv2.INTER_LINEAR) * np.float32([W / w, H / h])
+
+
 @MEASUREMENT.register("default")
 def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_px: tuple[int, int],
                  image_binning: int = 1, region: Optional[np.ndarray] = None, quiet: Optional[np.ndarray] = None,
                  flame: Optional[np.ndarray] = None, hidden: Optional[np.ndarray] = None, name: str = "", keep_flow: bool = False, saturation: bool = True, occlusion_fraction: float = 0.25,
-                 shake: bool = True, median_threshold: Optional[float] = 2.0, median_eps_px: float = 0.1
-                 ) -> ViewMeasurement:
+                 shake: bool = True, median_threshold: Optional[float] = 2.0, median_eps_px: float = 0.1,
+                 flow_factor="auto") -> ViewMeasurement:
     """Measure one view.
 
     Args:
@@ -118,21 +184,31 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
         shake: estimate the view's rigid shift between the exposures and take it off (:mod:`~nerif.sensing.shake`).
         median_threshold, median_eps_px: the normalised median test's threshold and noise floor [px of the full
             sensor] (:mod:`~nerif.sensing.vectors`); threshold None: no test.
+        flow_factor: the flow and the texture's detectors (occlusion, the exposures compared) read the images made
+            this many times smaller (:func:`shrunk`; saturation and the noise read them as they are); ``auto``: as
+            the texture's scale says (:func:`shrink_factor`).
     """
     h, w = grid_px
+    H, W = reference.shape
     valid = np.ones((h, w), bool) if region is None else np.asarray(region, dtype=bool).copy()
-    width = texture_width(reference)  # the texture's own scale, measured once for every detector
-    contrast = local_contrast(reference, width)  # the reference's texture, read by two steps
-    found = images_compared(distorted, reference, width, contrast)
-    detected = occluded(reference, occlusion_fraction, width, contrast) if occlusion_fraction else None
-    for what, unreadable in (("saturated", saturated(distorted, reference, width_px=width) if saturation else None),
+    # the texture detectors and the flow read the images made ``f`` times smaller where the texture spans many pixels
+    f = shrink_factor(reference, flow_factor)
+    small = shrunk(reference, f)
+    width = texture_width(small)  # the texture's own scale [px of the small images], measured once for every detector
+    contrast = local_contrast(small, width)  # the reference's texture, read by two steps
+    found = images_compared(shrunk(distorted, f), small, width, contrast)
+    found.update(flow_factor=f, clipped=clipped_share(distorted, reference))  # an area mean is rarely at the top
+    detected = enlarged(occluded(small, occlusion_fraction, width, contrast), H, W) if occlusion_fraction else None
+    for what, unreadable in (("saturated", saturated(distorted, reference, width_px=f * width) if saturation else None),
                              ("occluded", _either(detected, hidden))):
         lost = _on_grid(unreadable, h, w) & valid if unreadable is not None else np.zeros((h, w), bool)
         found[what] = float(lost.mean())
         valid &= ~lost
     if flame is not None:
         distorted = without_flame_light(distorted, flame)
-    u_image, found["normalise_px"] = estimate(flow, distorted, reference, width)
+    u_small, normalise_px = estimate(flow, shrunk(distorted, f), small, width)
+    u_image = enlarged(u_small, H, W)
+    found["normalise_px"] = f * normalise_px if normalise_px else normalise_px
     u = resample(u_image, h, w).astype(np.float32) * np.float32(image_binning)  # px of the full sensor
     unmeasured = valid & ~np.isfinite(u).all(-1)
     found["unmeasured"] = float(unmeasured.mean())
@@ -148,7 +224,8 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     valid &= ~rejected
     u[~valid] = np.nan
     peak = float(np.linalg.norm(u[valid], axis=-1).max()) if valid.any() else 0.0
-    found.update(displacement_max_px=peak, valid_fraction=float(valid.mean()), outside_px=outside_reach(u, valid, quiet))
+    found.update(displacement_max_px=peak, valid_fraction=float(valid.mean()),
+                 outside_px=outside_reach(u, valid, quiet), noise=noise_of(distorted, reference, u_image, valid, quiet, f * width))
     left = ", ".join(f"{100 * found[k]:.1f} % {k}" for k in ("saturated", "occluded", "unmeasured", "rejected")
                      if found[k] > 0)
     log.info("%s: displacement up to %.2f px; shake (%+.3f, %+.3f) px taken off%s%s", name or "view", peak, s[0], s[1],

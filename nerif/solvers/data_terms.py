@@ -13,6 +13,7 @@ import logging
 from dataclasses import dataclass
 from typing import Optional
 
+import numpy as np
 import torch
 
 from nerif.data import Scene
@@ -20,10 +21,12 @@ from nerif.losses import deflection_terms
 from nerif.losses.images import bandpass, cell_origin, cell_weights, photometric_residual, photometric_scale
 from nerif.registry import Registry
 from nerif.sensing.imaging import bspline_coefficients
+from nerif.sensing.noise import FLOOR as NOISE_FLOOR
 from nerif.solvers.batches import RayBatcher
 
 DATA_TERMS = Registry("data term", package="nerif.solvers")
 log = logging.getLogger(__name__)
+FLOW_WEIGHT_BLOCK = 4  # image pixels between rays at which the flow term weighs ``flow_weight`` (the shared captures')
 MARGIN = 4  # rows of border between views in the image term's stacked images (bicubic reads 2 px around)
 
 
@@ -45,19 +48,28 @@ def scene_rays(scene: Scene, index: torch.Tensor) -> RayBatch:
 @DATA_TERMS.register("flow")
 class DeflectionTerm:
     """``mean |eps - eps_obs|^2`` over random rays, ``eps_obs`` the scene's observed deflections (the optical
-    flow's displacements converted through the rig, or a synthetic scene's own)."""
+    flow's displacements converted through the rig, or a synthetic scene's own), each ray's weighed by its view's
+    noise where the measurement read one (``noise_weighted``, :func:`noise_weights`: the flow's error grows with
+    the images' noise)."""
 
     fitted = "flow"  # what the term fits once set up: flow | images
 
+    def __init__(self, noise_weighted: bool = True):
+        self.noise_weighted = bool(noise_weighted)
+
     def setup(self, scene: Scene, batches: RayBatcher, iterations: int, masks=None) -> "DeflectionTerm":
         self.scene, self.batches = scene, batches
+        self.view_weight = noise_weights(scene) if self.noise_weighted else None  # (V,) or None
+        self.ray_weight = (None if self.view_weight is None else  # (N,)
+                           self.view_weight.float().to(scene.dirs.device).repeat_interleave(scene.view_counts()))
         return self
 
     def draw(self, iteration: int) -> RayBatch:
         return scene_rays(self.scene, self.batches(iteration))
 
     def terms(self, eps: dict, batch: RayBatch, iteration: int) -> dict:
-        return deflection_terms(eps, self.scene.observed[batch.index])
+        weight = self.ray_weight[batch.index] if self.ray_weight is not None else None
+        return deflection_terms(eps, self.scene.observed[batch.index], weight)
 
     def parameter_groups(self) -> list[dict]:
         """The term's own parameters, fitted with the field (optimiser groups); none here."""
@@ -73,6 +85,31 @@ class DeflectionTerm:
 
     def load_state_dict(self, st: dict) -> None:
         pass
+
+
+def noise_weights(scene: Scene) -> Optional[torch.Tensor]:
+    """(V,) each view's weight from the noise its measurement read in its images (``noise``; None where it read
+    none: the median of the others'; at least :data:`~nerif.sensing.noise.FLOOR`, so that images without noise weigh
+    alike): ``1 / sigma_v^2`` over its mean over the views (maximum likelihood: a view
+    twice as noisy counts a quarter; views of one noise level count 1 each); None where the scene holds no reading
+    (a synthetic scene's deflections)."""
+    noise = (scene.measured or {}).get("noise")
+    known = [n for n in noise or () if n]
+    if not known:
+        return None
+    sigma = torch.tensor([n if n else float(np.median(known)) for n in noise], dtype=torch.float64)
+    inverse = 1 / sigma.clamp(min=NOISE_FLOOR) ** 2
+    return inverse / inverse.mean()
+
+
+def view_scales(photometric: list[float], weights: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """(V,) what one unit of each view's mean squared residual is divided by in the image term: each view's
+    :func:`~nerif.losses.images.photometric_scale` ``s_v`` (the residual in the unit of a deflection misfit, every
+    view alike), or with noise ``weights`` (:func:`noise_weights`) ``1 / (w_v mean(1 / s))``: the residuals weighed
+    as their noise says, the weights summing to what they did, so that the term keeps its size beside the flow
+    term (on the shared captures, whose views' ``s_v`` agree within 0.2 %, the same as without)."""
+    s = torch.tensor(photometric, dtype=torch.float64)
+    return s if weights is None else 1 / (weights * (1 / s).mean())
 
 
 @DATA_TERMS.register("images")
@@ -95,19 +132,26 @@ class ImageTerm(DeflectionTerm):
             (PyTorch's cubic convolution) or ``bilinear`` (:func:`nerif.sensing.imaging.sample`).
         patch: rays per side of a patch (at least 2); a step draws ``rays_per_batch / patch^2`` patches.
         lowpass_px: blur both images by a Gaussian of this width [px] first (sensor noise); null: none.
-        flow_weight: after the warm-up, the flow term on the same rays is added with this weight (0: images alone).
+        flow_weight: after the warm-up, the flow term on the same rays is added with this weight where rays are
+            :data:`FLOW_WEIGHT_BLOCK` image pixels apart, and ``(4 / b)^2`` times it where they are ``b`` apart: the
+            images' information grows with the pixels between the rays, the flow's does not (0: images alone).
             It costs no rendering. The images fix the fine structure the flow's window blurs; the flow keeps the
             low-frequency level, which the image fit alone leaves off on the independent captures (why is not
             established: ``benchmarks/RESULTS.md``).
         shake_lr: each view's shake between the exposures (the measurement stage's, :mod:`nerif.sensing.shake`) is
             refined with the field at this learning rate [image px a step] (0: kept as measured): the images hold
             the shake photometrically, where the flow's estimate carries its own bias (:meth:`shakes_px`).
+        pixels_per_cell: compare at most this many of each cell's ``b x b`` image pixels a step, drawn afresh
+            (:meth:`cell_pixels`); null: all.
+        noise_weighted: weigh each view's residuals, and its flow's, by the noise its measurement read
+            (:func:`noise_weights`, :func:`view_scales`); false: every view alike in the unit of a deflection misfit.
     """
 
     fitted = "images"
 
     def __init__(self, flow_warmup: float = 0.25, highpass_px: Optional[float] = 8.0, interpolation: str = "bspline",
-                 patch: int = 2, lowpass_px: Optional[float] = None, flow_weight: float = 1.0, shake_lr: float = 0.0):
+                 patch: int = 2, lowpass_px: Optional[float] = None, flow_weight: float = 1.0, shake_lr: float = 0.0,
+                 noise_weighted: bool = True, pixels_per_cell: Optional[int] = 256):
         if not 0.0 <= flow_warmup < 1.0:
             raise ValueError(f"data_term.flow_warmup={flow_warmup}: a share of the iterations within [0, 1)")
         if highpass_px is not None and not highpass_px >= 0:
@@ -122,7 +166,10 @@ class ImageTerm(DeflectionTerm):
         if not shake_lr >= 0:
             raise ValueError(f"data_term.shake_lr={shake_lr}: a learning rate [image px a step], 0 to keep the shakes")
         self.lowpass_px, self.flow_weight, self.shake_lr = lowpass_px, float(flow_weight), float(shake_lr)
-        self.flow = DeflectionTerm()
+        if pixels_per_cell is not None and not (isinstance(pixels_per_cell, int) and pixels_per_cell >= 1):
+            raise ValueError(f"data_term.pixels_per_cell={pixels_per_cell}: a number of image pixels (or null: all)")
+        self.pixels_per_cell = pixels_per_cell
+        self.flow = DeflectionTerm(noise_weighted)
 
     def setup(self, scene: Scene, batches: RayBatcher, iterations: int, masks=None) -> "ImageTerm":
         """The cells of every view, the displacement matrices of every ray, the images to compare; ``batches``
@@ -153,13 +200,17 @@ class ImageTerm(DeflectionTerm):
             if self.mode == "bspline":  # sampled through its spline's coefficients (:func:`~nerif.sensing.imaging.sample`)
                 ref = bspline_coefficients(ref)
             gain.append(A.float())
-            scale.append(torch.full((len(A),), photometric_scale(ref, A, mode=self.mode), device=device))
+            scale.append(photometric_scale(ref, A, mode=self.mode))
             # the views one above the other, MARGIN rows of border between them: one sampling call per step
             refs.append(torch.nn.functional.pad(ref[None, None], (0, 0, MARGIN, MARGIN), mode="replicate")[0, 0])
             dists.append(torch.nn.functional.pad(bandpass(im.distorted, self.highpass_px, self.lowpass_px)[None, None],
                                                  (0, 0, MARGIN, MARGIN), mode="replicate")[0, 0])
         self.b, self.rows = b, H + 2 * MARGIN
-        self.gain, self.scale = torch.cat(gain), torch.cat(scale)  # (N, 2, 3), (N,): per ray
+        # the images' information grows with the pixels a cell holds, the flow's does not
+        self.flow_share = self.flow_weight * (FLOW_WEIGHT_BLOCK / b) ** 2
+        self.gain = torch.cat(gain)  # (N, 2, 3) per ray
+        # what a unit of each view's squared residual is worth (:func:`view_scales`), per ray (N,)
+        self.scale = view_scales(scale, self.flow.view_weight).float().to(device).repeat_interleave(scene.view_counts())
         # each view's shake between the exposures, which the images hold and the field does not [image px]
         self.binning = torch.tensor([[im.camera.binning] for im in scene.images], dtype=torch.float64, device=device)
         self.shake = (scene.shake_px() / self.binning).float()
@@ -206,19 +257,33 @@ class ImageTerm(DeflectionTerm):
         views = torch.searchsorted(s.view_start, top, right=True) - 1
         x = cell_origin(s.pixel[top], s.cameras[0].width, self.b)
         x[:, 1] += views * self.rows + MARGIN  # the view's place in the stacked images
-        x = (x[:, None, :] + self.pixel_offsets).reshape(-1, 2)
+        offsets, weights = self.cell_pixels(len(top))
+        x = (x[:, None, :] + offsets).reshape(-1, 2)
         A = self.gain[batch.index]  # (R, 2, 3)
         out = {}
         for name, e in eps.items():
             u = cells((A * e[:, None, :]).sum(-1))  # (C, 4, 2) [image px]
             shake = (self.shake + self.shake_correction)[views][:, None, :]
-            u = torch.einsum("pk,ckd->cpd", self.weights.to(u.dtype), u) + shake.to(u.dtype)
+            u = torch.einsum("cpk,ckd->cpd", weights.to(u.dtype), u) + shake.to(u.dtype)
             r = photometric_residual(self.reference, self.distorted, x, u.reshape(-1, 2), self.mode)
             out[name] = (r.reshape(len(top), -1).pow(2).mean(-1) / self.scale[top]).mean()
         if self.flow_weight > 0:
             flow = self.flow.terms(eps, batch, iteration)
-            out = {name: out[name] + self.flow_weight * flow[name] for name in out}
+            out = {name: out[name] + self.flow_share * flow[name] for name in out}
         return out
+
+    def cell_pixels(self, n_cells: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """The image pixels a step compares in each of its ``n_cells`` cells: all ``b x b``, or where there are
+        more than ``pixels_per_cell``, that many drawn afresh for each cell and step (every pixel is compared over
+        the steps; a step's cost stays that of ``pixels_per_cell``, however many pixels a ray spans). Returns
+        (n_cells, P, 2) their offsets [px] from the cell's first pixel and (n_cells, P, 4) their corner weights
+        (:func:`~nerif.losses.images.cell_weights`)."""
+        m = self.pixels_per_cell
+        if m is None or m >= len(self.weights):
+            return (self.pixel_offsets.expand(n_cells, -1, -1), self.weights.expand(n_cells, -1, -1))
+        pick = torch.rand((n_cells, len(self.weights)), generator=self.batches.generator,
+                          device=self.weights.device).argsort(-1)[:, :m]
+        return self.pixel_offsets[pick], self.weights[pick]
 
     def parameter_groups(self) -> list[dict]:
         """The views' shake corrections [image px], at ``shake_lr``, without weight decay."""
