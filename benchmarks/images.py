@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import subprocess
 import sys
 import time
@@ -185,16 +186,20 @@ def report(rows: dict) -> str:
 SIZE_ANGLES = [0, 18, 36, 54, 72, 90, 108, 126, 144, 162]  # 10 views
 
 
-def size_rows(factors: list[float], out_dir: Path, settings: list[str]) -> list[dict]:
+def size_rows(factors: list[float], out_dir: Path, settings: list[str], resume: bool = False) -> list[dict]:
     """The default on a 10-view capture of the shared flame at each factor (:func:`finer_capture`), each run in
     its own process (its peak memory its own): megapixels a view, preprocessing (``setup_time_s``: reading,
-    measuring every view, the masks), training (``wall_time_s``), peak memory, sigma error."""
+    measuring every view, the masks), training (``wall_time_s``), peak memory, sigma error. ``resume``: a finished
+    run is read back; else an earlier run's folder is replaced."""
     rows = []
     for k in factors:
         root = finer_capture(out_dir / f"size_x{k:g}", k, SIZE_ANGLES)
         run_dir = out_dir / f"size_x{k:g}_run"
+        finished = resume and (run_dir / "metrics.json").is_file()
+        if run_dir.exists() and not finished:
+            shutil.rmtree(run_dir)
         t0 = time.perf_counter()
-        done = subprocess.run([sys.executable, "-m", "nerif", "data=capture", f"data.root={root}",
+        done = subprocess.CompletedProcess([], 0) if finished else subprocess.run([sys.executable, "-m", "nerif", "data=capture", f"data.root={root}",
                                f"data.binning={int(4 * k)}", f"data.truth={CAPTURE / 'volume.npz'}",
                                f"hydra.run.dir={run_dir}", "train.progress=false", *settings])
         if done.returncode:
@@ -248,7 +253,7 @@ def main(argv=None) -> dict:
         payload["flows"] = [row for root in roots for row in flows.capture_rows(root, None)]
         text += "\n" + flows.report(payload["flows"])
     if args.sizes:
-        payload["sizes"] = size_rows(args.sizes, out, args.set)
+        payload["sizes"] = size_rows(args.sizes, out, args.set, args.resume)
         text += ("\n## Time and memory against the image size (the default, 10 views)\n\n"
                  + size_report(payload["sizes"]))
     write_report(out, "images", payload, text)

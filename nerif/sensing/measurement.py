@@ -124,11 +124,12 @@ TUNED_SCALE_PX = 1.45  # the texture's correlation length the flows' settings ar
 def shrink_factor(reference: np.ndarray, setting) -> int:
     """How many times smaller the images are made for the flow: ``setting``, or for ``auto`` the texture's
     correlation length (:func:`~nerif.sensing.flow.texture_scale_px`) over :data:`TUNED_SCALE_PX`, rounded down:
-    1 on the shared captures (1.45 px) and nerif's patterns (1.34-1.40 px), 2 on a 4x finer camera's images of the
-    same background (3.21 px: sigma error 0.089 with the flow alone, 0.153 on the images as they are). On the
-    Poisson-disk pattern enlarged k times (1.34, 2.06, 2.85, 3.65, 5.07 px for k = 1, 2, 3, 4, 6) a factor of
-    about k / 2 measures best (k = 4: 0.0058 px of error a pixel of the k = 1 grid with 2, 0.0097 with 3, 0.019 with
-    1; k = 3: 0.0081 with 1 and 0.0082 with 2)."""
+    1 on the shared captures (1.45 px) and nerif's patterns (1.34-1.54 px), 2 on a 4x finer camera's images of the
+    same background (3.19 px: sigma error 0.089 with the flow alone, 0.153 on the images as they are), 5 at 10.5x
+    finer (7.34 px: 0.077, 0.080 with 3). On the Poisson-disk pattern enlarged k times (1.34, 2.07, 2.89, 3.76,
+    5.50, 9.45 px for k = 1, 2, 3, 4, 6, 10.5: factors 1, 1, 1, 2, 3, 6) about k / 2 measures best (k = 4: 0.0058 px
+    of error a pixel of the k = 1 grid with 2, 0.0097 with 3, 0.019 with 1; k = 3: 0.0081 with 1 and 0.0082 with 2;
+    k = 10.5: 0.0053, 0.0054, 0.0064 with 4, 5, 6, 0.014 with 3)."""
     if setting == "auto":
         return max(1, int(texture_scale_px(reference) / TUNED_SCALE_PX))
     if not (isinstance(setting, int) and setting >= 1):
