@@ -13,7 +13,7 @@ import torch
 from omegaconf import DictConfig
 
 from nerif.configs import check_complete, group
-from nerif.data.capture import probe_voxels
+from nerif.data.capture import image_pixels, probe_voxels
 from nerif.io.folders import check_writable, run_folder
 from nerif.memory import check_memory
 from nerif.reconstruct import WarningRecords, reconstruct, resuming
@@ -90,7 +90,9 @@ def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     check_complete(cfg)
     check_train(group(cfg, "train"), cfg.seed)
     device = resolve_device(cfg.device)
-    check_memory(cfg, device, probe=probe_voxels(cfg.data.root) if cfg.data.name == "capture" else None)
+    capture = cfg.data.name == "capture"
+    check_memory(cfg, device, probe=probe_voxels(cfg.data.root) if capture else None,
+                 images=image_pixels(cfg.data.root) if capture else None)
     with WarningRecords() as early:  # what the log warns of before the data is read goes to metrics.json too
         threads = resolve_threads(cfg.threads, parallel_jobs)
     torch.set_num_threads(threads)

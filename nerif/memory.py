@@ -18,6 +18,8 @@ from omegaconf import DictConfig
 log = logging.getLogger(__name__)
 GIB = 2.0**30
 FLOAT = 4  # bytes of a float32
+PER_PIXEL = 24  # bytes an image pixel of a capture's view takes over a run (both images, as read, measured, band-passed
+               # and as B-spline coefficients): 6.0 GiB at 10 views of 25 megapixels, 1.2 GiB of it the run's own
 PER_VOXEL = 96  # bytes a voxel of the probe grid takes over a run (the hull, the masks, the outputs): 95 measured
                 # between 80^3 and 160^3 voxels on a capture
 
@@ -48,10 +50,12 @@ def _phantom_voxels(phantom: DictConfig) -> Optional[float]:
     return None
 
 
-def estimates(cfg: DictConfig, probe: Optional[tuple[float, str]] = None) -> list[tuple[str, str, float]]:
+def estimates(cfg: DictConfig, probe: Optional[tuple[float, str]] = None,
+              images: Optional[tuple[float, str]] = None) -> list[tuple[str, str, float]]:
     """(what, the key that sets it, bytes) of a run's largest allocations. ``probe``: the voxels of the probe grid
-    and the key that sets it, where the data read it from a file (a capture's rig file), else None."""
-    out = []
+    and the key that sets it, where the data read it from a file (a capture's rig file), else None; ``images``: the
+    pixels of a capture's images and what sets them (:func:`nerif.data.capture.image_pixels`), else None."""
+    out = [("the images", images[1], images[0] * PER_PIXEL)] if images is not None else []
     if cfg.data.name == "synthetic":
         voxels = _phantom_voxels(cfg.phantom)
         if voxels is not None:  # the phantom and its deflection field on the supersampled grid, float64
@@ -82,10 +86,11 @@ def estimates(cfg: DictConfig, probe: Optional[tuple[float, str]] = None) -> lis
 
 
 def check_memory(cfg: DictConfig, device: torch.device, share: float = 0.8,
-                 probe: Optional[tuple[float, str]] = None) -> None:
+                 probe: Optional[tuple[float, str]] = None, images: Optional[tuple[float, str]] = None) -> None:
     """One sentence, before any work, when the run's estimated allocations exceed ``share`` of the free memory of
-    ``device``, naming the largest and the key that sets it (``probe``: as :func:`estimates` takes it)."""
-    parts = estimates(cfg, probe)
+    ``device``, naming the largest and the key that sets it (``probe``, ``images``: as :func:`estimates` takes
+    them)."""
+    parts = estimates(cfg, probe, images)
     need = sum(b for _, _, b in parts)
     free = available_bytes(device)
     if need <= share * free:

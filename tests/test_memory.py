@@ -59,3 +59,27 @@ def test_a_captures_probe_grid_is_read_from_its_rig_file(tmp_path, monkeypatch):
     monkeypatch.setattr("nerif.memory.available_bytes", lambda device: 16 * 2.0**30)
     with pytest.raises(ValueError, match=f"lower probe.shape in {tmp_path / 'rig.yaml'}$"):
         check_memory(cfg, torch.device("cpu"), probe=(voxels, key))
+
+
+def test_a_captures_images_count_before_any_work(tmp_path, monkeypatch):
+    """Issue 39: a capture's images take about 24 bytes a pixel over a run (6.0 GiB at 10 views of 25 megapixels).
+    Nine views of 20000 x 20000 px (3.6e9 pixels) are refused before any image is read, naming what sets them."""
+    import yaml
+
+    from nerif.data.capture import image_pixels
+
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump({
+        "format": "nerif-capture", "version": 1, "roi_px": [0, 0, 20000, 20000],
+        "camera": {"focal_mm": 105.0, "pitch_um": 5.0, "sensor_px": [20000, 20000], "f_number": 32.0,
+                   "camera_to_centre_mm": 800.0, "camera_to_background_mm": 1600.0},
+        "views": {"angles_deg": [20 * k for k in range(9)], "references": "r.png",
+                  "images": [f"d{k}.png" for k in range(9)]},
+        "probe": {"shape": [60, 100, 60], "voxel_mm": 1.0}, "ambient": {"T0": 296.0, "n0": 1.00027}}))
+    pixels, what = image_pixels(str(tmp_path))
+    assert pixels == 9 * 20000 * 20000 and str(tmp_path / "rig.yaml") in what
+    cfg = compose(["data=capture", f"data.root={tmp_path}"])
+    part = [b for name, _, b in estimates(cfg, images=(pixels, what)) if name == "the images"]
+    assert part == [pytest.approx(3.6e9 * 24)]
+    monkeypatch.setattr("nerif.memory.available_bytes", lambda device: 16 * 2.0**30)
+    with pytest.raises(ValueError, match="the images alone 80.5 GiB.*lower the views in .*rig.yaml \\(fewer views"):
+        check_memory(cfg, torch.device("cpu"), images=(pixels, what))

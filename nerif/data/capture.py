@@ -132,6 +132,14 @@ def probe_voxels(root: str) -> tuple[float, str]:
     return float(np.prod(rig.box.shape)), f"probe.shape in {rig.path}"
 
 
+def image_pixels(root: str) -> tuple[float, str]:
+    """The pixels of one frame's images of a capture folder (every view's, at the sensor's size) and what sets them,
+    for the memory estimate before any work (:func:`nerif.memory.check_memory`)."""
+    rig = read_rig(dataset_folder(root))
+    w, h = rig.sensor_px
+    return float(rig.n_views * w * h), f"the views in {rig.path} (fewer views, or images cropped to the flame)"
+
+
 @DATASETS.register("capture")
 def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto", heldout: Optional[list] = None,
             frames=None, frame: Optional[int] = None, truth: Optional[str] = None, device: str = "cpu") -> Scene:

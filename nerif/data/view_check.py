@@ -22,7 +22,9 @@ TEXTURE_LOST = 0.3  # the distorted exposure's contrast over its reference's bel
 ABSENT, WILD = 0.25, 4.0  # a view's RMS displacement against the views' median: below, no flame; above, no flow
 SIGN = 0.2  # hot evidence (:func:`nerif.data.scene.hot_evidence`) beyond which a view's sign is clear
 KNOCKED_PX = 1.0  # a shake larger than this [px of the full sensor] and than its flame's displacements: knocked
-CLIPPED = 0.05  # a view with more of its pixels at full scale than this is said to clip (nerif's own chain: 2 %)
+CLIPPED = 0.10  # a view with more of its pixels at full scale than this is said to clip: nerif's own chain clips the
+                # dots' centres of 2 % (the default rig) to 7 % (40 um pixels, written captures) of a well-exposed
+                # view's pixels; a 2x gain clipped at full scale 22 %
 OUTSIDE = 0.5  # displacements outside the box's image above this share of those inside: the flame is not in the box
 
 

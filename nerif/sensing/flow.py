@@ -42,12 +42,14 @@ def texture_scale_px(image: np.ndarray) -> float:
     return scale(4 * first) if 4 * first > 8.0 else first
 
 
-def texture_width(reference: np.ndarray) -> float:
+def texture_width(reference: np.ndarray, scale_px: Optional[float] = None) -> float:
     """The texture's own width [px]: :data:`AUTO_WIDTH_PER_SCALE` correlation lengths of ``reference``'s texture
-    (:func:`texture_scale_px`) within :data:`AUTO_WIDTH_RANGE_PX`; the scale over which the detectors of
-    :mod:`nerif.sensing.measurement` look, and the flow's normalisation where the flame's light is seen."""
+    (:func:`texture_scale_px`, or ``scale_px`` where the caller has it) within :data:`AUTO_WIDTH_RANGE_PX`; the
+    scale over which the detectors of :mod:`nerif.sensing.measurement` look, and the flow's normalisation where the
+    flame's light is seen."""
     lo, hi = AUTO_WIDTH_RANGE_PX
-    return float(np.clip(AUTO_WIDTH_PER_SCALE * texture_scale_px(reference), lo, hi))
+    scale = texture_scale_px(reference) if scale_px is None else scale_px
+    return float(np.clip(AUTO_WIDTH_PER_SCALE * scale, lo, hi))
 
 
 def warped(reference: np.ndarray, u: np.ndarray) -> np.ndarray:

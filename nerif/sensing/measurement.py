@@ -47,8 +47,8 @@ class ViewMeasurement:
             flow) and ``rejected`` (outlier vectors), ``normalise_px`` (the flow's width), ``flow_factor``
             (:func:`shrink_factor`), ``noise``
             (one exposure's noise [share of full scale] where the view sees no flame,
-            :func:`~nerif.sensing.noise.residual_noise`; None where too few pixels are usable) and
-            :func:`images_compared`'s ``difference_rms`` and ``texture_ratio``.
+            :func:`~nerif.sensing.noise.residual_noise`; None where too few pixels are usable), ``clipped``
+            (:func:`clipped_share`) and :func:`images_compared`'s ``difference_rms`` and ``texture_ratio``.
         distorted: (H, W) the distorted image the flow compared (the flame's light taken off where it was
             recorded), what an image term fits.
         flow: (H, W, 2) the flow itself on the images' grid [px of that grid], kept where asked for, else None.
@@ -66,11 +66,6 @@ def _on_grid(mask: np.ndarray, h: int, w: int) -> np.ndarray:
     return resample(mask.astype(np.float32), h, w) > 0
 
 
-def _on_image(mask: np.ndarray, H: int, W: int) -> np.ndarray:
-    """A ray-grid mask -> the images' grid: each pixel takes its block's (nearest) value."""
-    return cv2.resize(mask.astype(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST).astype(bool)
-
-
 def noise_of(distorted: np.ndarray, reference: np.ndarray, u_image: np.ndarray, valid: np.ndarray,
              quiet: Optional[np.ndarray], width_px: float) -> Optional[float]:
     """The images' noise [share of full scale] (:func:`~nerif.sensing.noise.residual_noise`) on the usable pixels
@@ -80,7 +75,7 @@ def noise_of(distorted: np.ndarray, reference: np.ndarray, u_image: np.ndarray, 
     where = valid & quiet if quiet is not None else valid
     if int(where.sum()) * (H * W) < MIN_PIXELS * where.size:
         where = valid
-    return residual_noise(distorted, reference, u_image, _on_image(where, H, W), width_px)
+    return residual_noise(distorted, reference, u_image, enlarged(where, H, W), width_px)
 
 
 def outside_reach(u: np.ndarray, valid: np.ndarray, quiet: Optional[np.ndarray]) -> Optional[float]:
@@ -97,19 +92,17 @@ def images_compared(distorted: np.ndarray, reference: np.ndarray, width_px: floa
     """What a view's two exposures (H, W) say of each other, for :mod:`nerif.data.view_check`: ``difference_rms``,
     the RMS of their difference [share of full scale] (0: the same image), and ``texture_ratio``, the distorted
     exposure's median local contrast (:func:`~nerif.sensing.occlusion.local_contrast` over the texture's width
-    ``width_px``) over the reference's (about 1: the same background; near 0: black, flat or overexposed), and
-    ``clipped``, the share of pixels at full scale in either exposure (the dots' centres included, which
-    :func:`~nerif.sensing.saturation.saturated` keeps: they still cost accuracy);
+    ``width_px``) over the reference's (about 1: the same background; near 0: black, flat or overexposed);
     ``contrast``: the reference's local contrast where the caller has it."""
     d, r = np.float32(distorted), np.float32(reference)
     ref = float(np.median(local_contrast(r, width_px) if contrast is None else contrast))
     ratio = float(np.median(local_contrast(d, width_px))) / ref if ref > 0 else 1.0
-    return {"difference_rms": float(np.sqrt(np.mean((d - r) ** 2))), "texture_ratio": ratio,
-            "clipped": clipped_share(d, r)}
+    return {"difference_rms": float(np.sqrt(np.mean((d - r) ** 2))), "texture_ratio": ratio}
 
 
 def clipped_share(distorted: np.ndarray, reference: np.ndarray) -> float:
-    """The share of pixels at full scale in either exposure (H, W)."""
+    """The share of pixels at full scale in either exposure (H, W) as recorded (the dots' centres included, which
+    :func:`~nerif.sensing.saturation.saturated` keeps: they still cost accuracy)."""
     return float(np.mean((distorted >= TOP) | (reference >= TOP)))
 
 
@@ -121,9 +114,10 @@ def _either(a: Optional[np.ndarray], b: Optional[np.ndarray]) -> Optional[np.nda
 TUNED_SCALE_PX = 1.45  # the texture's correlation length the flows' settings are tuned for (the shared captures')
 
 
-def shrink_factor(reference: np.ndarray, setting) -> int:
+def shrink_factor(scale_px: float, setting) -> int:
     """How many times smaller the images are made for the flow: ``setting``, or for ``auto`` the texture's
-    correlation length (:func:`~nerif.sensing.flow.texture_scale_px`) over :data:`TUNED_SCALE_PX`, rounded down:
+    correlation length ``scale_px`` (:func:`~nerif.sensing.flow.texture_scale_px`) over :data:`TUNED_SCALE_PX`,
+    rounded down:
     1 on the shared captures (1.45 px) and nerif's patterns (1.34-1.54 px), 2 on a 4x finer camera's images of the
     same background (3.19 px: sigma error 0.089 with the flow alone, 0.153 on the images as they are), 5 at 10.5x
     finer (7.34 px: 0.077, 0.080 with 3). On the Poisson-disk pattern enlarged k times (1.34, 2.07, 2.89, 3.76,
@@ -131,7 +125,7 @@ def shrink_factor(reference: np.ndarray, setting) -> int:
     of error a pixel of the k = 1 grid with 2, 0.0097 with 3, 0.019 with 1; k = 3: 0.0081 with 1 and 0.0082 with 2;
     k = 10.5: 0.0053, 0.0054, 0.0064 with 4, 5, 6, 0.014 with 3)."""
     if setting == "auto":
-        return max(1, int(texture_scale_px(reference) / TUNED_SCALE_PX))
+        return max(1, int(scale_px / TUNED_SCALE_PX))
     if not (isinstance(setting, int) and setting >= 1):
         raise ValueError(f"measure.flow_factor={setting!r}: a whole number (the images made that many times smaller "
                          "for the flow; 1: as they are) or auto")
@@ -193,12 +187,14 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     H, W = reference.shape
     valid = np.ones((h, w), bool) if region is None else np.asarray(region, dtype=bool).copy()
     # the texture detectors and the flow read the images made ``f`` times smaller where the texture spans many pixels
-    f = shrink_factor(reference, flow_factor)
+    scale = texture_scale_px(reference)
+    f = shrink_factor(scale, flow_factor)
     small = shrunk(reference, f)
-    width = texture_width(small)  # the texture's own scale [px of the small images], measured once for every detector
+    # the texture's own width [px of the small images], measured once for every detector
+    width = texture_width(small, scale if f == 1 else None)
     contrast = local_contrast(small, width)  # the reference's texture, read by two steps
     found = images_compared(shrunk(distorted, f), small, width, contrast)
-    found.update(flow_factor=f, clipped=clipped_share(distorted, reference))  # an area mean is rarely at the top
+    found.update(flow_factor=f, clipped=clipped_share(distorted, reference))  # on the images as recorded
     detected = enlarged(occluded(small, occlusion_fraction, width, contrast), H, W) if occlusion_fraction else None
     for what, unreadable in (("saturated", saturated(distorted, reference, width_px=f * width) if saturation else None),
                              ("occluded", _either(detected, hidden))):
@@ -226,7 +222,8 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     u[~valid] = np.nan
     peak = float(np.linalg.norm(u[valid], axis=-1).max()) if valid.any() else 0.0
     found.update(displacement_max_px=peak, valid_fraction=float(valid.mean()),
-                 outside_px=outside_reach(u, valid, quiet), noise=noise_of(distorted, reference, u_image, valid, quiet, f * width))
+                 outside_px=outside_reach(u, valid, quiet),
+                 noise=noise_of(distorted, reference, u_image, valid, quiet, f * width))
     left = ", ".join(f"{100 * found[k]:.1f} % {k}" for k in ("saturated", "occluded", "unmeasured", "rejected")
                      if found[k] > 0)
     log.info("%s: displacement up to %.2f px; shake (%+.3f, %+.3f) px taken off%s%s", name or "view", peak, s[0], s[1],
