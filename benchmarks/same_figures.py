@@ -67,6 +67,15 @@ def cases(out_dir: Path) -> dict[str, list[str]]:
     return out
 
 
+def output_folder(out: str) -> Path:
+    """The benchmark's output folder ``out``, made, once the shared data are known to lie beside the checkout."""
+    if not SHARED.is_dir():
+        raise SystemExit(f"{SHARED} is missing: this benchmark needs the shared data beside the checkout")
+    path = Path(out)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
 def run(tree: Path, overrides: list[str], folder: Path) -> dict:
     """One ``python -m nerif`` of ``tree``'s code: its metrics (empty if it wrote none), exit status, wall time
     and the last line of its error output."""
@@ -124,10 +133,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--series-iterations", type=int, default=200, help="iterations of each frame of the series")
     ap.add_argument("--out", default="benchmarks/results/same_figures")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    if not SHARED.is_dir():
-        raise SystemExit(f"{SHARED} is missing: this benchmark needs the shared data beside the checkout")
+    out = output_folder(args.out)
     rows: dict = {"cases": {}, "times": {}}
     with ExitStack() as stack:
         trees = {"this checkout": REPO, **{ref: checkout(ref, stack) for ref in args.against}}

@@ -92,11 +92,21 @@ class Evaluation:
         index = torch.arange(len(h.dirs), device=h.dirs.device) if index is None else index
         return predict(h.origins[h.ray_views()[index]], h.dirs[index]) * self.scene.scale
 
-    def heldout_errors(self, predict: Predict, every: bool = False, pred: Optional[torch.Tensor] = None) -> dict:
+    def heldout_misfit(self, predict: Predict) -> Optional[float]:
+        """What a field leaves unexplained of every held-out ray's measurement: the displacement RMSE [px] where
+        deflections are physical, else the deflection RMSE (sigma units); None without held-out views. The figure
+        by which a run chooses between two of its fields (:class:`~nerif.solvers.neural.NeuralSolver`)."""
+        if self.scene.heldout is None:
+            return None
+        m = self.heldout_errors(predict, every=True, photometric=False)
+        return m.get("heldout_displacement_rmse_px", m["heldout_deflection_rmse"])
+
+    def heldout_errors(self, predict: Predict, every: bool = False, pred: Optional[torch.Tensor] = None,
+                       photometric: bool = True) -> dict:
         """Errors on the held-out views (empty without any): deflection RMSE [rad] and PSNR [dB] of predicted
         against observed deflections and, where deflections are physical, the same for the image displacements
-        [px]. On the fixed held-out rays, or on ``every`` held-out ray (``pred``: their predictions [rad] when
-        already computed)."""
+        [px], and where the scene holds images the photometric residual (``photometric``). On the fixed held-out rays,
+        or on ``every`` held-out ray (``pred``: their predictions [rad] when already computed)."""
         h = self.scene.heldout
         if h is None:
             return {}
@@ -112,7 +122,7 @@ class Evaluation:
                      heldout_displacement_psnr_db=psnr_db(u_pred, u_obs, self.peaks["displacement"]))
             if every:  # what no flame at all leaves
                 m["heldout_displacement_rmse_px_none"] = deflection_rmse(torch.zeros_like(u_obs), u_obs)
-        if h.image_block() is not None:
+        if photometric and h.image_block() is not None:
             m["heldout_photometric_rmse"] = self.photometric_rmse(index, pred)
             if every:  # what the flow's displacements and none leave, for comparison
                 m["heldout_photometric_rmse_flow"] = self.photometric_rmse(index, obs)

@@ -304,9 +304,12 @@ def test_a_series_capture_reconstructs_every_frame_warm_started(series, tmp_path
     cfg = tiny_config("data=capture", f"data.root={root}", "data.binning=8", "train.iterations=40",
                       "sequence.iterations=10", synthetic=False)
     m = run(cfg, tmp_path)
-    assert [(r["frame"], r["warm_start"], r["iterations"]) for r in m["frames"]] == [(0, False, 40), (1, True, 10),
-                                                                                   (2, True, 10)]
+    # each frame fits the flow for its iterations, then the images for half as many more (data_term.image_iterations)
+    assert [(r["frame"], r["warm_start"], r["iterations"]) for r in m["frames"]] == [(0, False, 60), (1, True, 15),
+                                                                                   (2, True, 15)]
     assert all(r["heldout_displacement_rmse_px"] > 0 for r in m["frames"]) and m["temperature_rmse_K"] is None  # no truth
+    kept = [r["data_term_kept"] for r in m["frames"]]  # each frame's held-out choice, and how often the series made it
+    assert set(kept) <= {"images", "flow"} and m["data_term_kept"].endswith(f"in {kept.count(max(kept))} of 3 frames")
     assert (tmp_path / "sequence.pvd").read_text().count("reconstruction.vti") == 3
 
 

@@ -192,6 +192,11 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
                    f"{100 * m['heldout_photometric_rmse_none']:.2f} %)" if known("heldout_photometric_rmse_flow") else "")
             held.append(f"image residual {100 * m['heldout_photometric_rmse']:.2f} % of full range{ref}")
         parts.append("held out: " + "; ".join(held))
+    if m.get("flow_stage") and m.get("images_stage"):  # the held-out views chose between the flow's field and the images'
+        flow, images = m["flow_stage"]["heldout_misfit"], m["images_stage"]["heldout_misfit"]
+        parts.append(f"kept the {m['data_term_kept']}' field (held out: images {images:.3g}, flow {flow:.3g})")
+    elif m.get("data_term_kept"):  # a series: how often each was kept
+        parts.append(f"field kept: {m['data_term_kept']}")
     parts += [f"WARNING: {w}" for w in m.get("warnings", [])]
     resumed = m["wall_time_s"] > m["total_time_s"]  # training of earlier sessions counts, this process's time not
     parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training{' over every session' if resumed else ''} "

@@ -26,7 +26,7 @@ COLUMNS = [("temperature_rmse_K", "T RMSE [K]", "{:.2f}"), ("temperature_rmse_fl
            ("heldout_deflection_rmse", "held-out deflection RMSE", "{:.4g}"),
            ("heldout_psnr_db", "held-out PSNR [dB]", "{:.2f}"),
            ("heldout_displacement_rmse_px", "held-out displacement RMSE [px]", "{:.3f}"),
-           ("iterations", "iterations", "{}")]
+           ("data_term_kept", "field kept (held out)", "{}"), ("iterations", "iterations", "{}")]
 
 
 def collect(sweep_dir: Path) -> list[dict]:

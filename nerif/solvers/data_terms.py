@@ -121,18 +121,30 @@ class ImageTerm(DeflectionTerm):
     B-spline by default).
     A patch of k x k rendered rays scores (k - 1)^2 cells: with k = 4, 2.25x the pixels of separate cells for the
     same rendering, and the residual's noise, not its cost, is what limits it. No optical flow enters it,
-    except for the first ``flow_warmup`` share of the iterations, which fit the flow's deflections to start
-    from (the residual is not convex beyond about half the background's texture wavelength).
+    except for the flow's stage first: ``flow_warmup`` of ``train.iterations`` fit the flow's deflections to start
+    from (the residual is not convex beyond about half the background's texture wavelength), then the images
+    refine that field for ``image_iterations`` more, the learning rate's cosine restarted at ``image_lr`` of its
+    peak. The held-out views then choose (``choose_by_heldout``): where the images' field does not explain their
+    measured displacements better than the flow's field did at the end of its stage, the run keeps the flow's
+    (:class:`~nerif.solvers.neural.NeuralSolver`), so that images which a camera recorded otherwise than this
+    term models them cannot make a run worse than the flow alone.
 
     Args:
-        flow_warmup: share of the iterations that fit the flow term first (0: images from the start).
+        flow_warmup: share of ``train.iterations`` that fit the flow term first (0: images from the start; 1: the
+            whole of them, the flow's own converged run).
+        image_iterations: share of ``train.iterations`` that fit the images after the flow's stage; null: the
+            rest of them (``1 - flow_warmup``).
+        image_lr: the images' stage restarts the cosine learning-rate schedule at this share of ``train.lr``; null:
+            one schedule over both stages.
+        choose_by_heldout: keep the images' field only where it explains the held-out views' displacements better
+            than the flow's field at the end of its stage (false: the images' field always).
         highpass_px: compare the images less their Gaussian blur of this width [px] (a smooth brightness
             change between the exposures, the flame's own light); null: as they are.
         interpolation: of the reference image: ``bspline`` (the cubic B-spline through its pixels), ``bicubic``
             (PyTorch's cubic convolution) or ``bilinear`` (:func:`nerif.sensing.imaging.sample`).
         patch: rays per side of a patch (at least 2); a step draws ``rays_per_batch / patch^2`` patches.
         lowpass_px: blur both images by a Gaussian of this width [px] first (sensor noise); null: none.
-        flow_weight: after the warm-up, the flow term on the same rays is added with this weight where rays are
+        flow_weight: in the images' stage, the flow term on the same rays is added with this weight where rays are
             :data:`FLOW_WEIGHT_BLOCK` image pixels apart, and ``(4 / b)^2`` times it where they are ``b`` apart: the
             images' information grows with the pixels between the rays, the flow's does not (0: images alone).
             It costs no rendering. The images fix the fine structure the flow's window blurs; the flow keeps the
@@ -149,11 +161,22 @@ class ImageTerm(DeflectionTerm):
 
     fitted = "images"
 
-    def __init__(self, flow_warmup: float = 0.25, highpass_px: Optional[float] = 8.0, interpolation: str = "bspline",
+    def __init__(self, flow_warmup: float = 1.0, highpass_px: Optional[float] = 8.0, interpolation: str = "bspline",
                  patch: int = 2, lowpass_px: Optional[float] = None, flow_weight: float = 1.0, shake_lr: float = 0.0,
-                 noise_weighted: bool = True, pixels_per_cell: Optional[int] = 256):
-        if not 0.0 <= flow_warmup < 1.0:
-            raise ValueError(f"data_term.flow_warmup={flow_warmup}: a share of the iterations within [0, 1)")
+                 noise_weighted: bool = True, pixels_per_cell: Optional[int] = 256,
+                 image_iterations: Optional[float] = 0.5, image_lr: Optional[float] = 0.2,
+                 choose_by_heldout: bool = True):
+        if not 0.0 <= flow_warmup <= 1.0:
+            raise ValueError(f"data_term.flow_warmup={flow_warmup}: a share of train.iterations within [0, 1]")
+        if image_iterations is not None and not 0.0 < image_iterations <= 10.0:
+            raise ValueError(f"data_term.image_iterations={image_iterations}: a share of train.iterations within "
+                             "(0, 10], or null (the rest of them)")
+        if image_iterations is None and flow_warmup >= 1.0:
+            raise ValueError("data_term.flow_warmup=1 leaves no iteration to the images: set data_term.image_iterations "
+                             "(a share of train.iterations after the flow's), or use data_term=flow")
+        if image_lr is not None and not 0.0 < image_lr <= 1.0:
+            raise ValueError(f"data_term.image_lr={image_lr}: a share of train.lr within (0, 1], or null (one schedule)")
+        self.image_share, self.image_lr, self.choose_by_heldout = image_iterations, image_lr, bool(choose_by_heldout)
         if highpass_px is not None and not highpass_px >= 0:
             raise ValueError(f"data_term.highpass_px={highpass_px}: a width in pixels (or null)")
         if interpolation not in ("bspline", "bicubic", "bilinear"):
@@ -179,6 +202,8 @@ class ImageTerm(DeflectionTerm):
             hint = ": use data=capture or data.sensing=realistic, or data_term=flow" if scene.images is None else ""
             raise ValueError(f"data_term=images needs {why}{hint}")
         self.scene, self.flow_iterations = scene, int(round(self.flow_warmup * iterations))
+        rest = iterations - self.flow_iterations
+        self.image_iterations = rest if self.image_share is None else max(1, int(round(self.image_share * iterations)))
         self.flow.setup(scene, batches, iterations)
         device = scene.dirs.device
         b, H = scene.image_block(), scene.images[0].reference.shape[0]
@@ -322,6 +347,6 @@ class ImagesWhereGiven(ImageTerm):
         if not why:
             return super().setup(scene, batches, iterations, masks)
         log.info("data_term=auto fits the flow's deflections: data_term=images would need %s", why)
-        self.fitted, self.scene, self.flow_iterations = "flow", scene, iterations
+        self.fitted, self.scene, self.flow_iterations, self.image_iterations = "flow", scene, iterations, 0
         self.flow.setup(scene, batches, iterations)
         return self

@@ -120,9 +120,13 @@ class NeuralSolver(IterativeSolver):
         self.batches = RayBatcher(scene, masks.inside, self.rays_per_batch, self.views_per_batch,
                                   self.outside_fraction, self.generator)
         self.data_term.setup(scene, self.batches, self.iterations, masks)
+        self.switch, self.restart, self.flow_stage = None, None, None  # the images' stage (data_term=images)
         if self.data_term.fitted != "flow":
             self.labels["data_term"] = self.data_term.fitted
-            self.report["images_from_iteration"] = int(self.data_term.flow_iterations)  # after the flow's warm-up
+            self.switch = int(self.data_term.flow_iterations)
+            self.iterations = self.switch + int(self.data_term.image_iterations)
+            self.restart = self.data_term.image_lr if 0 < self.switch < self.iterations else None
+            self.report["images_from_iteration"] = self.switch  # after the flow's stage
         rms = float(scene.eps[self.batches.inside()].double().norm(dim=-1).pow(2).mean().sqrt()) / scene.scale
         tv = TotalVariation(scene.box, lc["tv_weight"], lc["tv_points"], rms)
         self.tv = tv if tv.active else None
@@ -133,8 +137,7 @@ class NeuralSolver(IterativeSolver):
         groups = [{"params": rest, "weight_decay": 0.0}] + ([{"params": enc, "weight_decay": self.table_decay}]
                                                             if enc else []) + self.data_term.parameter_groups()
         self.optimizer = torch.optim.AdamW(groups, lr=oc["lr"], betas=tuple(oc["betas"]), eps=oc["eps"], fused=fused)
-        self.scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(self.optimizer, T_max=self.iterations,
-                                                                    eta_min=oc["lr_min"])
+        self.scheduler = self._schedule(0)
         if self.init_volume is not None:
             self._warm_start(self.init_volume)
         self.average = averaged_field(self.field, self.ema_decay, self.rate) if self.ema_decay > 0 else None
@@ -146,6 +149,84 @@ class NeuralSolver(IterativeSolver):
         self.rays_skipped = 0
         self._eval_sampler = UniformSampler(self.sampler.samples_per_ray, jitter=False)
         return self
+
+    def _schedule(self, iteration: int) -> torch.optim.lr_scheduler.CosineAnnealingLR:
+        """The cosine annealing of the stage that holds ``iteration``, from its peak (``train.lr``; the images'
+        stage: ``data_term.image_lr`` of it where it restarts the schedule) down to ``train.lr_min``."""
+        stage, length = self._stage(iteration)
+        factor = self.restart if stage == 1 else 1.0
+        for g in self.optimizer.param_groups:
+            g.setdefault("peak_lr", g["lr"])
+            g["lr"] = g["initial_lr"] = g["peak_lr"] * factor
+        return torch.optim.lr_scheduler.CosineAnnealingLR(self.optimizer, T_max=length, eta_min=self.optim_cfg["lr_min"])
+
+    def _stage(self, iteration: int) -> tuple[int, int]:
+        """(0 or 1, its length in iterations): the stage of the learning-rate schedule that holds ``iteration``
+        (1: the images' stage, where it restarts the schedule)."""
+        if self.restart is None:
+            return 0, self.iterations
+        return (0, self.switch) if iteration < self.switch else (1, self.iterations - self.switch)
+
+    def _end_of_flow_stage(self) -> None:
+        """At the switch from the flow to the images: the flow's field and what it leaves of the held-out views
+        (what the images' field must beat), and the images' learning-rate schedule where it restarts."""
+        if self.data_term.choose_by_heldout:
+            misfit = self.evaluation.heldout_misfit(self.predict)
+            if misfit is not None:
+                weights = {k: v.detach().clone() for k, v in self.estimate.state_dict().items()}
+                self.flow_stage = {"weights": weights, "heldout": misfit, "figures": self._stage_figures(misfit)}
+        if self.restart is not None:
+            self.scheduler = self._schedule(self.iteration)
+
+    def choose_by_heldout(self) -> Optional[str]:
+        """After the images' stage: the field the held-out views prefer. Keeps the images' field where it explains
+        the held-out views' displacements better than the flow's did (:meth:`Evaluation.heldout_misfit`), else
+        puts the flow's field back; says which in the log and in :attr:`report` (``data_term_kept``, and
+        ``flow_stage``, ``images_stage``: each field's :meth:`_stage_figures`) and returns the one it kept (None where nothing was
+        chosen: no images' stage, no held-out view, or not finished)."""
+        if (not self.switch or self.iteration < self.iterations or "data_term_kept" in self.report
+                or not self.data_term.choose_by_heldout):  # no flow's stage (flow_warmup=0): nothing to choose from
+            return None
+        if self.flow_stage is None:
+            log.info("data_term=images: no held-out view to choose between the flow's and the images' fields by; "
+                     "the images' is kept")
+            return None
+        flow, images = self.flow_stage["heldout"], self.evaluation.heldout_misfit(self.predict)
+        kept = "images" if images < flow else "flow"
+        unit = "px" if self.evaluation.physical else "(sigma)"
+        self.report.update(data_term_kept=kept, flow_stage=self.flow_stage["figures"],
+                           images_stage=self._stage_figures(images))
+        if kept == "flow":
+            self.estimate.load_state_dict(self.flow_stage["weights"])
+            self.field.load_state_dict(self.flow_stage["weights"])
+            log.info("data_term=images: the images' field explains the held-out views worse than the flow's "
+                        "(%.4g against %.4g %s RMS of their displacements): the flow's field is kept "
+                        "(data_term.choose_by_heldout=false keeps the images')", images, flow, unit)
+        else:
+            log.info("data_term=images: the images' field explains the held-out views better than the flow's (%.4g "
+                     "against %.4g %s RMS of their displacements) and is kept", images, flow, unit)
+        return kept
+
+    def _stage_figures(self, misfit: float) -> dict:
+        """What a stage's field leaves of the held-out views (``heldout_misfit``) and, where a truth is known, its
+        errors (:meth:`Evaluation.field_errors`): for ``metrics.json``, so that both fields can be compared."""
+        ev, h = self.evaluation, self.scene.heldout
+        out = {"heldout_misfit": misfit, **ev.field_errors(self.reconstruction())}
+        if h.image_block() is not None:  # the same field against the held-out images themselves
+            index = torch.arange(len(h.dirs), device=h.dirs.device)
+            out["heldout_photometric_rmse"] = ev.photometric_rmse(index, ev.heldout_predictions(self.predict, index))
+        return out
+
+    def fit(self, **kwargs) -> dict:
+        """:meth:`IterativeSolver.fit`, then the held-out views' choice between the flow's and the images' fields
+        (:meth:`choose_by_heldout`); where they keep the flow's, the last evaluation and the checkpoint are of it."""
+        last = super().fit(**kwargs)
+        if self.choose_by_heldout() == "flow":
+            self.history.pop()
+            last = self.evaluate()
+            if kwargs.get("checkpoint") is not None:
+                self._checkpoint(kwargs["checkpoint"])
+        return last
 
     def _warm_start(self, path: str) -> None:
         """Fit the field to the sigma volume of ``path`` (a ``reconstruction.npz`` of any solver on this probe
@@ -216,6 +297,8 @@ class NeuralSolver(IterativeSolver):
         if self.average is not None:
             self.average.update_parameters(self.field)
         self._timed(time.perf_counter() - t0)
+        if self.iteration == self.switch:
+            self._end_of_flow_stage()
         self.samples_seen += len(samples.positions)
         self.rays_seen += samples.n_rays
         self.samples_max = max(self.samples_max, int(stats[-2]))
@@ -306,7 +389,7 @@ class NeuralSolver(IterativeSolver):
                 "sampler": self.sampler.state_dict(), "scheduler": self.scheduler.state_dict(),
                 "generator": self.generator.get_state(), "samples_seen": self.samples_seen, "rays_seen": self.rays_seen,
                 "samples_max": self.samples_max, "rays_skipped": self.rays_skipped, "converged": self.converged,
-                "data_term": self.data_term.state_dict()}
+                "data_term": self.data_term.state_dict(), "flow_stage": self.flow_stage}
 
     def _load_field(self, st: dict, weights: Optional[dict] = None) -> None:
         try:
@@ -342,11 +425,12 @@ class NeuralSolver(IterativeSolver):
         except ValueError as e:
             raise ValueError("the checkpoint's optimiser state does not fit this solver (made by a nerif before "
                              f"train.table_decay, or with another encoder): {str(e).splitlines()[0]}") from None
+        self.flow_stage = st.get("flow_stage")
         self.scheduler.load_state_dict(st["scheduler"])
-        planned = self.scheduler.T_max
-        if planned != self.iterations:  # train.iterations changed on resume: the schedule as if planned so from the start
+        planned, length = self.scheduler.T_max, self._stage(int(st["iteration"]))[1]
+        if planned != length:  # train.iterations changed on resume: the schedule as if planned so from the start
             sch, t = self.scheduler, self.scheduler.last_epoch
-            sch.T_max = self.iterations
+            sch.T_max = length
             for g, base in zip(self.optimizer.param_groups, sch.base_lrs):
                 g["lr"] = sch.eta_min + (base - sch.eta_min) * (1 + math.cos(math.pi * min(t, sch.T_max) / sch.T_max)) / 2
             sch._last_lr = [g["lr"] for g in self.optimizer.param_groups]

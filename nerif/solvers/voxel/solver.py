@@ -45,7 +45,8 @@ def built_projector(name: str, box, origins: torch.Tensor, dirs: torch.Tensor, s
     return _LAST_PROJECTOR["projector"]
 
 
-NEURAL_ONLY = ("interpolation", "patch", "flow_weight", "flow_warmup")  # data_term settings of the neural image term
+NEURAL_ONLY = ("interpolation", "patch", "flow_weight", "flow_warmup", "image_iterations", "image_lr",
+               "choose_by_heldout")  # data_term settings of the neural image term
 
 
 @SOLVERS.register("cgls")
