@@ -167,7 +167,7 @@ def test_on_a_tiny_capture_the_held_out_views_choose_between_the_flows_field_and
     assert kept == ("images" if images["heldout_misfit"] < flow["heldout_misfit"] else "flow")
     assert m["auto"]["sigma_relative_error"] == pytest.approx(m["auto"][f"{kept}_stage"]["sigma_relative_error"],
                                                               rel=1e-5)
-    assert m["auto"]["iterations"] == 280 and "data_term_kept" not in m["images"]
+    assert m["auto"]["iterations"] == 200 + 100 and "data_term_kept" not in m["images"]  # image_iterations: 0.5
 
 
 def test_a_shake_measured_wrong_is_refined_by_the_images_where_the_field_explains_them(realistic):

@@ -194,7 +194,9 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
         parts.append("held out: " + "; ".join(held))
     if m.get("flow_stage") and m.get("images_stage"):  # the held-out views chose between the flow's field and the images'
         flow, images = m["flow_stage"]["heldout_misfit"], m["images_stage"]["heldout_misfit"]
-        parts.append(f"kept the {m['data_term_kept']}' field (held out: images {images:.3g}, flow {flow:.3g})")
+        whose = "the images'" if m["data_term_kept"] == "images" else "the flow's"
+        unit = "sigma" if "deflection_unit" in m else "px"
+        parts.append(f"kept {whose} field (held out: images {images:.3g}, flow {flow:.3g} {unit})")
     elif m.get("data_term_kept"):  # a series: how often each was kept
         parts.append(f"field kept: {m['data_term_kept']}")
     parts += [f"WARNING: {w}" for w in m.get("warnings", [])]

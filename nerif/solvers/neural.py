@@ -182,8 +182,8 @@ class NeuralSolver(IterativeSolver):
         """After the images' stage: the field the held-out views prefer. Keeps the images' field where it explains
         the held-out views' displacements better than the flow's did (:meth:`Evaluation.heldout_misfit`), else
         puts the flow's field back; says which in the log and in :attr:`report` (``data_term_kept``, and
-        ``flow_stage``, ``images_stage``: each field's :meth:`_stage_figures`) and returns the one it kept (None where nothing was
-        chosen: no images' stage, no held-out view, or not finished)."""
+        ``flow_stage``, ``images_stage``: each field's :meth:`_stage_figures`) and returns the one it kept (None where
+        nothing was chosen: no images' stage, no held-out view, or not finished)."""
         if (not self.switch or self.iteration < self.iterations or "data_term_kept" in self.report
                 or not self.data_term.choose_by_heldout):  # no flow's stage (flow_warmup=0): nothing to choose from
             return None
@@ -200,8 +200,8 @@ class NeuralSolver(IterativeSolver):
             self.estimate.load_state_dict(self.flow_stage["weights"])
             self.field.load_state_dict(self.flow_stage["weights"])
             log.info("data_term=images: the images' field explains the held-out views worse than the flow's "
-                        "(%.4g against %.4g %s RMS of their displacements): the flow's field is kept "
-                        "(data_term.choose_by_heldout=false keeps the images')", images, flow, unit)
+                     "(%.4g against %.4g %s RMS of their displacements): the flow's field is kept "
+                     "(data_term.choose_by_heldout=false keeps the images')", images, flow, unit)
         else:
             log.info("data_term=images: the images' field explains the held-out views better than the flow's (%.4g "
                      "against %.4g %s RMS of their displacements) and is kept", images, flow, unit)
