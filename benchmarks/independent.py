@@ -83,8 +83,8 @@ def report(table: dict, rows: list[str], captures: list[str]) -> str:
         ratios = [table[c][name]["sigma_relative_error"] / table[c][first]["sigma_relative_error"]
                   for c in captures if (table[c][name] or {}).get("sigma_relative_error")
                   and (table[c][first] or {}).get("sigma_relative_error")]
-        lines.append(f"| {name} | " + " | ".join(cell(table[c][name]) for c in captures)
-                     + f" | {max(ratios):.3f} |" if ratios else " | - |")
+        worst = f"{max(ratios):.3f}" if ratios else "-"
+        lines.append(f"| {name} | " + " | ".join(cell(table[c][name]) for c in captures) + f" | {worst} |")
     lines.append("")
     lines.append("Each cell: sigma relative error / T RMSE / held-out share explained / wall time of the run.")
     return "\n".join(lines) + "\n"
