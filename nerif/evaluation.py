@@ -92,13 +92,14 @@ class Evaluation:
         index = torch.arange(len(h.dirs), device=h.dirs.device) if index is None else index
         return predict(h.origins[h.ray_views()[index]], h.dirs[index]) * self.scene.scale
 
-    def heldout_misfit(self, predict: Predict) -> Optional[float]:
+    def heldout_misfit(self, predict: Predict, pred: Optional[torch.Tensor] = None) -> Optional[float]:
         """What a field leaves unexplained of every held-out ray's measurement: the displacement RMSE [px] where
-        deflections are physical, else the deflection RMSE (sigma units); None without held-out views. The figure
-        by which a run chooses between two of its fields (:class:`~nerif.solvers.neural.NeuralSolver`)."""
+        deflections are physical, else the deflection RMSE (sigma units); None without held-out views (``pred``:
+        the predictions of every held-out ray [rad] when already computed). The figure by which a run chooses
+        between two of its fields (:class:`~nerif.solvers.neural.NeuralSolver`)."""
         if self.scene.heldout is None:
             return None
-        m = self.heldout_errors(predict, every=True, photometric=False)
+        m = self.heldout_errors(predict, every=True, pred=pred, photometric=False)
         return m.get("heldout_displacement_rmse_px", m["heldout_deflection_rmse"])
 
     def heldout_errors(self, predict: Predict, every: bool = False, pred: Optional[torch.Tensor] = None,

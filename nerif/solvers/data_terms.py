@@ -347,6 +347,6 @@ class ImagesWhereGiven(ImageTerm):
         if not why:
             return super().setup(scene, batches, iterations, masks)
         log.info("data_term=auto fits the flow's deflections: data_term=images would need %s", why)
-        self.fitted, self.scene, self.flow_iterations, self.image_iterations = "flow", scene, iterations, 0
+        self.fitted, self.scene, self.flow_iterations = "flow", scene, iterations
         self.flow.setup(scene, batches, iterations)
         return self

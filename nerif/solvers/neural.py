@@ -21,7 +21,7 @@ from nerif.renderers import SAMPLERS, render_deflections
 from nerif.renderers.samplers import UniformSampler
 from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_faces
 from nerif.solvers.batches import RayBatcher, check_views_per_batch
-from nerif.solvers.data_terms import DATA_TERMS, scene_rays
+from nerif.solvers.data_terms import DATA_TERMS
 
 log = logging.getLogger(__name__)
 
@@ -170,11 +170,9 @@ class NeuralSolver(IterativeSolver):
     def _end_of_flow_stage(self) -> None:
         """At the switch from the flow to the images: the flow's field and what it leaves of the held-out views
         (what the images' field must beat), and the images' learning-rate schedule where it restarts."""
-        if self.data_term.choose_by_heldout:
-            misfit = self.evaluation.heldout_misfit(self.predict)
-            if misfit is not None:
-                weights = {k: v.detach().clone() for k, v in self.estimate.state_dict().items()}
-                self.flow_stage = {"weights": weights, "heldout": misfit, "figures": self._stage_figures(misfit)}
+        if self.data_term.choose_by_heldout and self.scene.heldout is not None:
+            weights = {k: v.detach().clone() for k, v in self.estimate.state_dict().items()}
+            self.flow_stage = {"weights": weights, "figures": self._stage_figures()}
         if self.restart is not None:
             self.scheduler = self._schedule(self.iteration)
 
@@ -191,11 +189,11 @@ class NeuralSolver(IterativeSolver):
             log.info("data_term=images: no held-out view to choose between the flow's and the images' fields by; "
                      "the images' is kept")
             return None
-        flow, images = self.flow_stage["heldout"], self.evaluation.heldout_misfit(self.predict)
+        figures = self._stage_figures()
+        flow, images = self.flow_stage["figures"]["heldout_misfit"], figures["heldout_misfit"]
         kept = "images" if images < flow else "flow"
         unit = "px" if self.evaluation.physical else "(sigma)"
-        self.report.update(data_term_kept=kept, flow_stage=self.flow_stage["figures"],
-                           images_stage=self._stage_figures(images))
+        self.report.update(data_term_kept=kept, flow_stage=self.flow_stage["figures"], images_stage=figures)
         if kept == "flow":
             self.estimate.load_state_dict(self.flow_stage["weights"])
             self.field.load_state_dict(self.flow_stage["weights"])
@@ -207,14 +205,19 @@ class NeuralSolver(IterativeSolver):
                      "against %.4g %s RMS of their displacements) and is kept", images, flow, unit)
         return kept
 
-    def _stage_figures(self, misfit: float) -> dict:
-        """What a stage's field leaves of the held-out views (``heldout_misfit``) and, where a truth is known, its
-        errors (:meth:`Evaluation.field_errors`): for ``metrics.json``, so that both fields can be compared."""
+    def _stage_figures(self) -> dict:
+        """What the field now leaves of the held-out views (``heldout_misfit``: :meth:`Evaluation.heldout_misfit`,
+        and the held-out image residual where the scene holds images), every held-out ray rendered once, and where
+        a truth is known its errors (:meth:`Evaluation.field_errors`): for ``metrics.json``, so that the flow's and
+        the images' fields can be compared."""
         ev, h = self.evaluation, self.scene.heldout
-        out = {"heldout_misfit": misfit, **ev.field_errors(self.reconstruction())}
+        index = torch.arange(len(h.dirs), device=h.dirs.device)
+        pred = ev.heldout_predictions(self.predict, index)
+        out = {"heldout_misfit": ev.heldout_misfit(self.predict, pred)}
         if h.image_block() is not None:  # the same field against the held-out images themselves
-            index = torch.arange(len(h.dirs), device=h.dirs.device)
-            out["heldout_photometric_rmse"] = ev.photometric_rmse(index, ev.heldout_predictions(self.predict, index))
+            out["heldout_photometric_rmse"] = ev.photometric_rmse(index, pred)
+        if self.scene.truth_T is not None:
+            out.update(ev.field_errors(self.reconstruction()))
         return out
 
     def fit(self, **kwargs) -> dict:
