@@ -3,6 +3,7 @@ true displacements, per interpolation of the reference (issue 46).
 
     python benchmarks/image_model.py                      # every clean shared capture with a true_disp.npz
     python benchmarks/image_model.py --views 0 4 8
+    python benchmarks/image_model.py --nerif-chain poisson_disk wavelet_noise   # nerif's own images of the same
 
 For each view, the residual ``I_ref(x + a u(x)) - I_dist(x)`` of both images high-passed as the image term does
 (``data_term.highpass_px``, 8 px) is evaluated at every pixel that moves by more than 0.1 px, ``u`` the capture's
@@ -27,7 +28,9 @@ from ablation import write_report  # noqa: E402
 from nerif.data.capture_images import capture_files, read_exposures  # noqa: E402
 from nerif.data.rig_file import read_rig  # noqa: E402
 from nerif.losses.images import bandpass  # noqa: E402
-from nerif.sensing.imaging import bspline_coefficients, sample  # noqa: E402
+from nerif.sensing.imaging import bspline_coefficients, sample, to_uint8  # noqa: E402
+from nerif.sensing.patterns import PATTERNS  # noqa: E402
+from nerif.sensing.realistic import exposures  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 MODES = ("bspline", "bicubic", "bilinear", "quintic")
@@ -45,12 +48,26 @@ def interpolated(image: torch.Tensor, x: torch.Tensor, mode: str) -> torch.Tenso
     return sample(bspline_coefficients(image) if mode == "bspline" else image, x, mode)
 
 
-def view_rows(root: Path, v: int, distorted, references, rig) -> list[dict]:
-    (d,), _ = read_exposures([distorted[v]], rig.sensor_px)
-    (r,), _ = read_exposures([references[v]], rig.sensor_px)
+def true_displacements(root: Path, v: int) -> torch.Tensor:
+    """(H, W, 2) the capture's exact displacements of view ``v`` [px] (column, row)."""
+    return torch.as_tensor(np.load(root / "true_disp.npz")["disp"][v], dtype=torch.float64).permute(1, 2, 0)
+
+
+def nerif_chain(u: torch.Tensor, pattern: str, samples: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """nerif's realistic exposures (:func:`nerif.sensing.realistic.exposures`: no blur, 1 % noise, 8-bit) of its
+    ``pattern`` seen through ``u`` (H, W, 2) with ``samples`` points a pixel and axis: (reference, distorted)."""
+    H, W = u.shape[:2]
+    background = torch.as_tensor(PATTERNS.build({"name": pattern}, height=H, width=W, seed=seed, samples=samples))
+    pair = exposures(background.double(), u, 0.0, 1e-4, 0.0, None, torch.Generator().manual_seed(seed),
+                     samples=samples)
+    return tuple(to_uint8(x) / 255.0 for x in pair)
+
+
+def view_rows(name: str, v: int, r: np.ndarray, d: np.ndarray, u: torch.Tensor) -> list[dict]:
+    """The optimum's gain and the residual at the truth of one view's reference ``r`` and distorted image ``d``
+    (H, W) seen through ``u`` (H, W, 2) [px], per interpolation."""
     R, D = (bandpass(torch.as_tensor(np.asarray(a), dtype=torch.float64), 8.0) for a in (r, d))
     H, W = R.shape
-    u = torch.as_tensor(np.load(root / "true_disp.npz")["disp"][v], dtype=torch.float64).permute(1, 2, 0)
     m = MARGIN
     rows, cols = torch.meshgrid(torch.arange(m, H - m), torch.arange(m, W - m), indexing="ij")
     uu = u[m:H - m, m:W - m].reshape(-1, 2)
@@ -62,9 +79,9 @@ def view_rows(root: Path, v: int, distorted, references, rig) -> list[dict]:
         mse = [float((interpolated(R, x + a * uu, mode) - observed).pow(2).mean()) for a in FACTORS]
         p = np.polyfit(FACTORS, mse, 2)
         at_one = float(np.sqrt(np.interp(1.0, FACTORS, mse))) * 255
-        out.append({"capture": root.name, "view": v, "mode": mode, "gain": float(-p[1] / (2 * p[0])),
+        out.append({"capture": name, "view": v, "mode": mode, "gain": float(-p[1] / (2 * p[0])),
                     "rms_at_truth": at_one})
-        print(f"{root.name} view {v} {mode}: optimum at {out[-1]['gain']:.4f}x the truth, RMS {at_one:.4f}", flush=True)
+        print(f"{name} view {v} {mode}: optimum at {out[-1]['gain']:.4f}x the truth, RMS {at_one:.4f}", flush=True)
     return out
 
 
@@ -83,6 +100,10 @@ def report(rows: list[dict]) -> str:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--views", nargs="+", type=int, default=[0, 4, 8])
+    ap.add_argument("--nerif-chain", nargs="*", default=[], metavar="PATTERN",
+                    help="also nerif's realistic exposures of these patterns through each capture's exact "
+                         "displacements, the pattern sampled at pixel centres (pixel_samples 1) and integrated over "
+                         "the pixel (4): does nerif's chain make images the way another program does?")
     ap.add_argument("--out", default="benchmarks/results/image_model")
     args = ap.parse_args(argv)
     # the clean captures: a dirty one's images hold a shake, a gain ramp and the flame's light that no gain measures
@@ -94,7 +115,14 @@ def main(argv=None) -> dict:
         rig = read_rig(root)
         distorted, references = capture_files(rig)
         for v in args.views:
-            rows += view_rows(root, v, distorted, references, rig)
+            (d,), _ = read_exposures([distorted[v]], rig.sensor_px)
+            (r,), _ = read_exposures([references[v]], rig.sensor_px)
+            u = true_displacements(root, v)
+            rows += view_rows(root.name, v, r, d, u)
+            for pattern in args.nerif_chain:
+                for samples in (1, 4):
+                    rows += view_rows(f"{root.name}, nerif's chain, {pattern}, pixel_samples {samples}", v,
+                                      *nerif_chain(u, pattern, samples, v), u)
     write_report(Path(args.out), "image_model", {"rows": rows}, report(rows))
     return {"rows": rows}
 

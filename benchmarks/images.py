@@ -62,22 +62,31 @@ TV_WEIGHTS = (1e-2, 1e-1, 1.0)
 ANGLES = [0, 20, 40, 60, 80, 100, 120, 140, 160]  # the shared rig's views
 
 
-def finer_capture(root: Path, k: float, angles: list = ANGLES) -> Path:
-    """The shared capture's flame written by ``nerif.write_capture`` (its own process) at ``k`` times the shared
-    rig's pixels a side (pitch 40 / k um, the Poisson-disk background and the rays' spacing the same in
-    millimetres, 1 % noise, f/32), unless ``root`` already holds it."""
+def finer_capture(root: Path, k: float, angles: list = ANGLES, flame: Path = CAPTURE, extra: tuple = ()) -> Path:
+    """The shared capture's flame (or the independent capture ``flame``'s) written by ``nerif.write_capture`` (its
+    own process) at ``k`` times the shared rig's pixels a side (pitch 40 / k um, the Poisson-disk background and the
+    rays' spacing the same in millimetres, 1 % noise, f/32; ``extra``: more overrides), unless ``root`` already
+    holds it."""
     if (root / "rig.yaml").is_file():
         return root
     if not float(4 * k).is_integer():
         raise SystemExit(f"--sizes {k}: 4 x K must be whole (the rays 4 shared pixels apart)")
     w, h = int(round(360 * k)), int(round(640 * k))
     subprocess.run([sys.executable, "-m", "nerif.write_capture", str(root), "phantom=file",
-                    f"phantom.path={CAPTURE / 'volume.npz'}", "phantom.key=T", "phantom.voxel_mm=1.0",
+                    f"phantom.path={flame / 'volume.npz'}", "phantom.key=T", "phantom.voxel_mm=1.0",
+                    f"data.T_max={t_max_of_capture(flame)}",
                     "data.render_supersample=1", f"rig.n_cameras={len(angles)}", f"rig.angles_deg={angles}",
                     f"rig.width_px={w}", f"rig.height_px={h}", f"rig.pitch_um={40 / k:g}", f"rig.binning={int(4 * k)}",
                     "data.sensing=realistic", "data.sensor.noise_variance=1e-4", f"pattern.spacing_px={4 * k:g}",
-                    f"pattern.radius_px={1.2 * k:g}", "--overwrite"], check=True)
+                    f"pattern.radius_px={1.2 * k:g}", *extra, "--overwrite"], check=True)
     return root
+
+
+def t_max_of_capture(root: Path) -> float:
+    """The hottest expected temperature [K] a capture's rig file names (its flame's ``delta_thre``)."""
+    import yaml
+
+    return float(yaml.safe_load((root / "rig.yaml").read_text()).get("T_max", 2000.0))
 
 
 def scenes(names: list[str], seeds: list[int], out_dir: Path) -> dict[str, str]:

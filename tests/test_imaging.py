@@ -2,7 +2,7 @@
 import numpy as np
 import torch
 
-from nerif.sensing.imaging import add_noise, diffraction_blur, resample, warp
+from nerif.sensing.imaging import add_noise, diffraction_blur, expose, resample, warp
 
 
 def _image():
@@ -102,3 +102,33 @@ def test_the_b_spline_interpolates_and_is_exact_and_differentiable_on_a_ramp():
     assert torch.allclose(v, 0.3 + 0.01 * x[:, 0] + 0.02 * x[:, 1], atol=1e-10)
     v.sum().backward()
     assert torch.allclose(x.grad, torch.tensor([0.01, 0.02], dtype=torch.float64).expand(50, 2), atol=1e-10)
+
+
+def test_a_pixel_records_the_share_of_its_area_a_displaced_sharp_edge_covers():
+    """A camera's pixel integrates: a dark-bright edge on a pixel boundary, moved 0.3 px, lights 0.3 of the pixel
+    beside it (not the bicubic value at its centre); for any displacement, whatever the band of rows."""
+    s, H, W = 4, 6, 10
+    fine = torch.zeros(H * s, W * s, dtype=torch.float64)
+    fine[:, 5 * s:] = 1.0  # bright from the boundary between pixels 4 and 5 on
+    torch.testing.assert_close(expose(fine, None, s)[:, 4:6], torch.tensor([[0.0, 1.0]] * H, dtype=torch.float64))
+    for shift in (0.3, 0.55, -0.2):
+        u = torch.zeros(H, W, 2, dtype=torch.float64)
+        u[..., 0] = shift  # pixel x shows the background at x + shift
+        seen = expose(fine, u, s, band_rows=4)
+        lit = seen[:, 4] if shift > 0 else 1.0 - seen[:, 5]
+        torch.testing.assert_close(lit, torch.full((H,), abs(shift), dtype=torch.float64))
+        assert float(seen[:, :3].abs().max()) == 0.0 and float((seen[:, 7:] - 1).abs().max()) == 0.0
+
+
+def test_an_exposure_through_a_displacement_field_reads_a_ramp_at_each_pixels_displaced_centre():
+    """On a linear background the pixel's mean is its value at the centre: exact for any smooth displacement."""
+    s, H, W = 3, 12, 16
+    rows, cols = torch.meshgrid(torch.arange(H * s), torch.arange(W * s), indexing="ij")
+    ramp = lambda r, c: 0.02 * c + 0.03 * r  # noqa: E731  [per px of the pixels]
+    fine = ramp((rows + 0.5) / s - 0.5, (cols + 0.5) / s - 0.5).double()
+    r, c = torch.meshgrid(torch.arange(H), torch.arange(W), indexing="ij")
+    u = torch.stack([0.4 * torch.sin(0.3 * r), -0.6 * torch.cos(0.2 * c)], -1).double()
+    seen = expose(fine, u, s)
+    inner = (slice(2, -2), slice(2, -2))  # away from the border, where points clamp
+    torch.testing.assert_close(seen[inner], ramp(r + u[..., 1], c + u[..., 0])[inner].double(), atol=0.02 * 0.4 / s ** 2,
+                               rtol=0)

@@ -22,3 +22,15 @@ def test_poisson_disk_points_keep_their_distance_and_fill_the_image():
     assert d[:, 1].min() >= 5.0 - 1e-9
     assert d[:, 1].mean() < 1.25 * 5.0  # maximal: no room left for another point nearly anywhere
     assert p[:, 0].min() >= 0 and p[:, 0].max() < 200 and p[:, 1].max() < 300
+
+
+@pytest.mark.parametrize("name", ["poisson_disk", "random_dots", "wavelet_noise"])
+def test_a_pattern_sampled_finer_is_the_same_background(name):
+    """``samples`` s: the same draw on a grid s times finer, whose pixel means give back the pixel-sampled
+    pattern (to the anti-aliasing's and the band's resampling differences, far below the pattern's contrast)."""
+    a = PATTERNS.build({"name": name}, height=48, width=64, seed=3)
+    f = PATTERNS.build({"name": name}, height=48, width=64, seed=3, samples=4)
+    assert f.shape == (192, 256) and f.dtype == np.float32 and f.min() >= 0 and f.max() <= 1
+    means = f.reshape(48, 4, 64, 4).mean((1, 3))
+    assert np.abs(means - a).mean() < 0.1 * a.std()
+    assert np.abs(f.reshape(48, 4, 64, 4) - means[:, None, :, None]).mean() > 0.02  # detail within a pixel

@@ -118,3 +118,20 @@ def test_light_brighter_than_full_scale_clips_and_the_stage_counts_it():
     saturates the distorted image, and the measurement stage counts those pixels."""
     bright = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], luminosity=20.0)))  # clips an area
     assert (bright.sensing["distorted"] == 255).any() and (bright.sensing["found/saturated"] > 0).all()
+
+
+def test_pixels_that_integrate_the_background_measure_as_well_and_a_bad_count_is_refused():
+    """``pixel_samples``: the camera's pixels integrate the displaced background (4 x 4 points) or read the
+    pattern at their displaced centres (1): another image pair, measured as well, the same rays."""
+    integrated = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], pixel_samples=4)))
+    centres = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], pixel_samples=1)))
+    assert not np.array_equal(integrated.sensing["distorted"], centres.sensing["distorted"])
+    for s in (integrated, centres):
+        assert 0 < float(s.sensing["displacement_rmse_px"]) < 0.1
+    for bad in (0, 2.5):
+        try:
+            DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], pixel_samples=bad)))
+        except ValueError as e:
+            assert "data.sensor.pixel_samples" in str(e)
+        else:
+            raise AssertionError(f"pixel_samples={bad} was accepted")

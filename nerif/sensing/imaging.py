@@ -35,6 +35,41 @@ def warp(image: torch.Tensor, u: torch.Tensor, mode: str = "bicubic") -> torch.T
     return out[0, 0]
 
 
+def expose(background: torch.Tensor, u: Optional[torch.Tensor], samples: int, band_rows: int = 64) -> torch.Tensor:
+    """What a camera's pixels record of a background seen through displacements ``u``: each pixel the mean of the
+    background at its ``samples x samples`` sub-pixel points, each point moved by ``u`` interpolated to it
+    (bilinear) and the background read there (bilinear on its fine grid), as a pixel integrates the light over
+    its area. The exposure of :func:`warp` (``samples`` 1) reads a pixel-sampled pattern at the displaced centre
+    instead, by the same kind of interpolation the image term models a view with.
+
+    Args:
+        background: (H s, W s) the pattern on a grid ``s = samples`` times finer than the pixels (sample ``j`` at
+            ``(j + 0.5) / s - 0.5`` px). u: (H, W, 2) [px] (column, row), or None for the undisplaced reference.
+        band_rows: pixel rows done at a time (memory: about 40 s^2 W bytes a row).
+    Returns:
+        (H, W); points past the border read the border value.
+    """
+    s = samples
+    H, W = background.shape[0] // s, background.shape[1] // s
+    fine = background[None, None]
+    if u is None:
+        return torch.nn.functional.avg_pool2d(fine, s)[0, 0]
+    field = u.permute(2, 0, 1)[None].to(background.dtype)  # (1, 2, H, W)
+    cols = (torch.arange(W * s, dtype=background.dtype) + 0.5) / s - 0.5  # sub-pixel points [px of the pixels]
+    out = background.new_empty(H, W)
+    for r0 in range(0, H, band_rows):
+        r1 = min(H, r0 + band_rows)
+        rows = (torch.arange(r0 * s, r1 * s, dtype=background.dtype) + 0.5) / s - 0.5
+        R, C = torch.meshgrid(rows, cols, indexing="ij")
+        du = kornia.geometry.transform.remap(field, C[None], R[None], mode="bilinear", padding_mode="border",
+                                             align_corners=True)[0]  # (2, h s, W s) [px]
+        seen = kornia.geometry.transform.remap(fine, ((C + du[0] + 0.5) * s - 0.5)[None],
+                                               ((R + du[1] + 0.5) * s - 0.5)[None], mode="bilinear",
+                                               padding_mode="border", align_corners=True)
+        out[r0:r1] = torch.nn.functional.avg_pool2d(seen, s)[0, 0]
+    return out
+
+
 def sample(image: torch.Tensor, x: torch.Tensor, mode: str = "bicubic") -> torch.Tensor:
     """The image at points ``x`` (P, 2) [px] (column, row; pixel centres at integers), differentiable in ``x``:
     (H, W) -> (P,). Points past the border read the border value. ``mode``: ``bilinear``, ``bicubic`` (PyTorch's

@@ -1,8 +1,10 @@
 """Background patterns for BOS, rendered at sensor resolution.
 
-Every pattern is ``fn(height, width, seed, **params) -> (height, width) float32`` with intensities in
-[0, 1], registered in :data:`PATTERNS` and reproducible under its seed. Lengths are in pixels of the
-image the pattern is rendered for.
+Every pattern is ``fn(height, width, seed, samples=1, **params) -> (height * samples, width * samples) float32``
+with intensities in [0, 1], registered in :data:`PATTERNS` and reproducible under its seed: the background as a
+pixel grid of ``height x width`` sees it, sampled ``samples`` times finer along each axis (sample ``j`` of the
+fine grid at ``(j + 0.5) / samples - 0.5`` px of the image), so that a camera's pixel can integrate it
+(:func:`nerif.sensing.imaging.expose`). Lengths are in pixels of the image, whatever ``samples``.
 """
 from __future__ import annotations
 
@@ -46,35 +48,40 @@ def poisson_disk_points(height: int, width: int, spacing_px: float, rng: np.rand
     return p[~np.isnan(p[:, 0])]
 
 
-def render_dots(height: int, width: int, points: np.ndarray, radius_px: float, supersample: int = 4) -> np.ndarray:
-    """Anti-aliased white discs of ``radius_px`` on black at ``points`` (row, column) [px] -> (H, W) float32."""
-    k = supersample
+def render_dots(height: int, width: int, points: np.ndarray, radius_px: float, samples: int = 1) -> np.ndarray:
+    """Anti-aliased white discs of ``radius_px`` on black at ``points`` (row, column) [px] -> (H s, W s) float32
+    (``s = samples`` a pixel and axis), each value the disc's cover of its sample's area (drawn on a grid at least
+    4 and 2 s times finer than the pixels, then area means)."""
+    k = samples * max(2, -(-4 // samples))
     canvas = np.zeros((height * k, width * k), np.uint8)
     shift = 4  # sub-pixel precision of cv2.circle: 2^-4 px
     centres = np.round((points * k + (k - 1) / 2) * (1 << shift)).astype(np.int64)
     r = int(round(radius_px * k * (1 << shift)))
     for y, x in centres:
         cv2.circle(canvas, (int(x), int(y)), r, 255, -1, lineType=cv2.LINE_8, shift=shift)
-    return cv2.resize(canvas.astype(np.float32) / 255.0, (width, height), interpolation=cv2.INTER_AREA)
+    return cv2.resize(canvas.astype(np.float32) / 255.0, (width * samples, height * samples),
+                      interpolation=cv2.INTER_AREA)
 
 
 @PATTERNS.register("poisson_disk")
-def poisson_disk(height: int, width: int, seed: int = 0, spacing_px: float = 4.0, radius_px: float = 1.2) -> np.ndarray:
+def poisson_disk(height: int, width: int, seed: int = 0, samples: int = 1, spacing_px: float = 4.0,
+                 radius_px: float = 1.2) -> np.ndarray:
     """Dots of ``radius_px`` at Poisson-disk positions (no two closer than ``spacing_px``): the paper's pattern."""
     rng = np.random.default_rng(seed)
-    return render_dots(height, width, poisson_disk_points(height, width, spacing_px, rng), radius_px)
+    return render_dots(height, width, poisson_disk_points(height, width, spacing_px, rng), radius_px, samples)
 
 
 @PATTERNS.register("random_dots")
-def random_dots(height: int, width: int, seed: int = 0, density: float = 0.06, radius_px: float = 1.2) -> np.ndarray:
+def random_dots(height: int, width: int, seed: int = 0, samples: int = 1, density: float = 0.06,
+                radius_px: float = 1.2) -> np.ndarray:
     """Dots of ``radius_px`` at uniformly random positions, ``density`` dots per pixel (overlaps allowed)."""
     rng = np.random.default_rng(seed)
     n = int(round(density * height * width))
-    return render_dots(height, width, rng.random((n, 2)) * [height, width], radius_px)
+    return render_dots(height, width, rng.random((n, 2)) * [height, width], radius_px, samples)
 
 
 @PATTERNS.register("wavelet_noise")
-def wavelet_noise(height: int, width: int, seed: int = 0, scale_px: float = 2.0) -> np.ndarray:
+def wavelet_noise(height: int, width: int, seed: int = 0, samples: int = 1, scale_px: float = 2.0) -> np.ndarray:
     """Band-limited noise (Cook & DeRose wavelet noise): white noise minus its low-pass, at a feature size of
     about ``scale_px``; normalised to [0, 1] (1st-99th percentiles)."""
     rng = np.random.default_rng(seed)
@@ -82,7 +89,8 @@ def wavelet_noise(height: int, width: int, seed: int = 0, scale_px: float = 2.0)
     h, w = h + h % 2, w + w % 2
     r = rng.standard_normal((h, w)).astype(np.float32)
     low = cv2.resize(cv2.resize(r, (w // 2, h // 2), interpolation=cv2.INTER_AREA), (w, h), interpolation=cv2.INTER_LINEAR)
-    band = cv2.resize(r - low, (int(round(w * scale_px)), int(round(h * scale_px))), interpolation=cv2.INTER_CUBIC)
-    band = band[:height, :width]
+    s = scale_px * samples
+    band = cv2.resize(r - low, (int(round(w * s)), int(round(h * s))), interpolation=cv2.INTER_CUBIC)
+    band = band[:height * samples, :width * samples]
     lo, hi = np.percentile(band, [1, 99])
     return np.clip((band - lo) / (hi - lo), 0, 1).astype(np.float32)

@@ -2,8 +2,10 @@
 
 Per view: finite-aperture rendering of the deflections (``aperture_rays`` rays per pixel from points across
 the lens to the background point the pixel is focused on, averaged: the probe is seen blurred by the circle
-of confusion), conversion to image displacements, a seeded background pattern warped by them, diffraction
-blur and sensor noise on the distorted and the reference image, then the measurement stage a capture goes through
+of confusion), conversion to image displacements, a seeded background pattern seen through them as a camera's pixels integrate it
+(``pixel_samples`` points a pixel and axis, each displaced; 1: the pattern sampled at pixel centres and warped by
+bicubic interpolation, much as the image term models a view), diffraction blur and sensor noise on the distorted
+and the reference image, then the measurement stage a capture goes through
 (:func:`nerif.sensing.measurement.measure_view`: the optical flow, block means to the training grid, validity), and
 the estimated displacements converted back to world-frame deflections on the training rays.
 
@@ -29,7 +31,7 @@ from nerif.sensing.displacement import deflection_to_displacement, displacement_
 from nerif.sensing.emission import flame_light
 from nerif.sensing.flow import FLOW, check_flow
 from nerif.sensing.measurement import MEASUREMENT
-from nerif.sensing.imaging import add_noise, diffraction_blur, resample, to_uint8, warp
+from nerif.sensing.imaging import add_noise, diffraction_blur, expose, resample, to_uint8, warp
 from nerif.sensing.models import SENSING
 from nerif.sensing.optics import aperture_points, aperture_rays, circle_of_confusion
 from nerif.sensing.patterns import PATTERNS
@@ -75,11 +77,14 @@ def true_displacements(delta: torch.Tensor, box: ProbeBox, render_camera: Camera
 
 def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_variance: float, gain_drift: float,
               glow: Optional[np.ndarray], generator: torch.Generator, gain_ramp: float = 0.0,
-              hidden: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
+              hidden: Optional[np.ndarray] = None, samples: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """The reference and the distorted exposure of one view.
 
     Args:
-        background: (H, W) the pattern, intensities in [0, 1]. u: (H, W, 2) displacements [px of these images].
+        background: (H s, W s) the pattern, intensities in [0, 1], sampled ``s = samples`` times a pixel and axis:
+            more than 1, each pixel integrates it (:func:`nerif.sensing.imaging.expose`); 1, the pattern at the
+            displaced pixel centres, interpolated bicubically (:func:`nerif.sensing.imaging.warp`).
+        u: (H, W, 2) displacements [px of these images].
         blur_px: the diffraction spot's diameter [px]. noise_variance: of the additive Gaussian noise on each.
         gain_drift: the distorted exposure's brightness over the reference's, less 1; ``gain_ramp``: that gain
             grows by this much more from the left edge to the right (an uneven illumination drift).
@@ -90,9 +95,10 @@ def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_v
     Returns: (H, W) reference and distorted images (floats, noise drawn from ``generator``: reference first), clipped
     to [0, 1] as a sensor clips at its full scale.
     """
-    reference = diffraction_blur(background, blur_px)
-    gain = (1.0 + gain_drift) * (1.0 + gain_ramp * torch.linspace(0.0, 1.0, background.shape[1]))[None, :]
-    distorted = diffraction_blur(warp(background, u), blur_px) * gain
+    seen = expose(background, u, samples) if samples > 1 else warp(background, u)
+    reference = diffraction_blur(expose(background, None, samples), blur_px)
+    gain = (1.0 + gain_drift) * (1.0 + gain_ramp * torch.linspace(0.0, 1.0, u.shape[1]))[None, :]
+    distorted = diffraction_blur(seen, blur_px) * gain
     if hidden is not None:
         occluder = torch.as_tensor(hidden)
         reference, distorted = (torch.where(occluder, DARK, x) for x in (reference, distorted))
@@ -103,7 +109,7 @@ def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_v
 
 def check_settings(camera: Camera, rig_binning: int, pattern: dict, flow: dict, aperture_rays: int,
                    noise_variance: float, image_binning: int, render_binning: int, luminosity: float,
-                   gain_drift: float, gain_ramp: float = 0.0, shake_px: float = 0.0, burner_radius_mm: float = 0.0
+                   gain_drift: float, gain_ramp: float, shake_px: float, burner_radius_mm: float, pixel_samples: int
                    ) -> None:
     """One sentence for a setting of :func:`realistic` that cannot run (``camera``: a training camera)."""
     PATTERNS.get(pattern["name"]), FLOW.get(flow["name"])
@@ -115,6 +121,8 @@ def check_settings(camera: Camera, rig_binning: int, pattern: dict, flow: dict, 
         raise ValueError(f"data.sensor.luminosity={luminosity}, data.sensor.shake_px={shake_px} and "
                          f"data.sensor.burner_radius_mm={burner_radius_mm} must be at least 0, "
                          f"data.sensor.gain_drift={gain_drift} and data.sensor.gain_ramp={gain_ramp} above -1")
+    if not (isinstance(pixel_samples, int) and 1 <= pixel_samples <= 16):
+        raise ValueError(f"data.sensor.pixel_samples={pixel_samples} must be a whole number from 1 to 16")
     aperture_points(aperture_rays, 1.0)
     for b, what in ((image_binning, "image_binning"), (render_binning, "render_binning")):
         if b < 1 or rig_binning % b and b % rig_binning:
@@ -128,7 +136,8 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
               aperture_rays: int = 60, wavelength_um: float = 0.5, noise_variance: float = 0.0,
               image_binning: int = 1, render_binning: Optional[int] = None, seed: int = 0, luminosity: float = 0.0,
               gain_drift: float = 0.0, gain_ramp: float = 0.0, shake_px: float = 0.0, burner_radius_mm: float = 0.0,
-              burner_top_mm: Optional[float] = None, measure: Optional[dict] = None, cache_dir=None):
+              burner_top_mm: Optional[float] = None, pixel_samples: int = 4, measure: Optional[dict] = None,
+              cache_dir=None):
     """Observed deflections of the training rays through the realistic BOS chain.
 
     Args:
@@ -148,6 +157,9 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         burner_radius_mm, burner_top_mm: an opaque burner tube on the axis (:mod:`nerif.sensing.burner`), its top
             at ``y = burner_top_mm`` (None: the probe box's bottom face); radius 0: none. The record's
             ``occluded_true`` is the share of each view's ray grid it hides.
+        pixel_samples: points a pixel and axis at which the background is seen, each through its own interpolated
+            displacement, and averaged: the pixel's integration of the light (1: the pattern sampled at pixel
+            centres and warped bicubically, as the image term interpolates: nearly an inverse crime for it).
         step_mm: quadrature step of the aperture rays (default: one voxel of ``delta``; the aperture average
             is as accurate with it as with half a voxel, to 2e-5 on Phantom 5, at half the cost).
         cache_dir: where the aperture renderings (the costly part) are cached, keyed by the field and the
@@ -161,7 +173,7 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
     measure = dict(measure or {"name": "default"})
     MEASUREMENT.get(measure["name"])
     check_settings(cameras[0], rig_binning, pattern, flow, aperture_rays, noise_variance, image_binning, render_binning,
-                   luminosity, gain_drift, gain_ramp, shake_px, burner_radius_mm)  # every check before the long work
+                   luminosity, gain_drift, gain_ramp, shake_px, burner_radius_mm, pixel_samples)  # before the long work
     top_mm = -0.5 * float(box.extent_mm[1]) if burner_top_mm is None else float(burner_top_mm)
     step_mm = step_mm or box.voxel_mm
     field_key = hashlib.sha256(delta.cpu().numpy().tobytes()).hexdigest()
@@ -178,13 +190,14 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         glow = luminosity * flame_light(delta, box, img_cam, coc["d_mm"] / img_cam.pitch_mm, step_mm) \
             if luminosity > 0 else None
         tube = burner_pixels(img_cam, burner_radius_mm, top_mm) if burner_radius_mm > 0 else None
-        background = torch.as_tensor(PATTERNS.build(pattern, height=H, width=W, seed=seed * 1009 + v))
+        background = torch.as_tensor(PATTERNS.build(pattern, height=H, width=W, seed=seed * 1009 + v,
+                                                     samples=pixel_samples))
         shake = np.random.default_rng(seed * 7919 + v).normal(0.0, shake_px, 2)  # px of the full sensor
         rec.setdefault("shake_true_px", []).append(shake)
         u_img = torch.as_tensor(resample(u_ren, H, W) + (shake / image_binning).astype(np.float32))
         reference, distorted = exposures(background, u_img, coc["d_diff_mm"] / img_cam.pitch_mm, noise_variance,
                                          gain_drift, glow, torch.Generator().manual_seed(seed * 1009 + v), gain_ramp,
-                                         tube)
+                                         tube, pixel_samples)
         if tube is not None:  # the share of the ray grid's blocks that see some of the tube
             blocks = resample(tube.astype(np.float32), cam.height, cam.width) > 0
             rec.setdefault("occluded_true", []).append(np.float64(blocks.mean()))
