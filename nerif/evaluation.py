@@ -14,7 +14,8 @@ import numpy as np
 import torch
 
 from nerif.data import Scene
-from nerif.losses.images import block_pixels, photometric_residual
+from nerif.data.observation import observations
+from nerif.losses.images import photometric_residual
 from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
 
 Predict = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (R, 3) origins [mm], dirs -> (R, 3) sigma units
@@ -135,14 +136,16 @@ class Evaluation:
         full range 1], ``u`` the displacement of deflections ``eps`` [rad] (R, 3), the same over each ray's block
         of image pixels: how well the deflections explain the held-out images themselves, whatever the flow says."""
         h = self.scene.heldout
-        views, total, count, b = h.ray_views()[index], 0.0, 0, h.image_block()
+        views, total, count = h.ray_views()[index], 0.0, 0
         u_all = h.to_displacement(eps.double(), index) + h.shake_px()[views]  # px of the full sensor, the shake in
+        models = observations(h)
         for v in views.unique().tolist():
-            sel, im, cam = views == v, h.images[v], h.cameras[v]
-            u = u_all[sel] / im.camera.binning  # px of the images' grid
-            x = block_pixels(h.pixel[index[sel]], cam.width, b)  # (R, b^2, 2)
+            sel, view = views == v, models[v]
+            u = view.image_px(u_all[sel])
+            x = view.pixels(h.pixel[index[sel]])  # (R, b^2, 2)
             u = u[:, None, :].expand(-1, x.shape[1], -1)
-            r = photometric_residual(im.reference.double(), im.distorted.double(), x.reshape(-1, 2), u.reshape(-1, 2))
+            r = photometric_residual(view.reference.double(), view.distorted.double(), x.reshape(-1, 2),
+                                     u.reshape(-1, 2))
             total, count = total + float(r.pow(2).sum()), count + r.numel()
         return (total / max(count, 1)) ** 0.5
 

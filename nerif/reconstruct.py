@@ -17,7 +17,7 @@ from nerif.configs import group
 from nerif.data import DATASETS
 from nerif.data.scene import hot_evidence, view_directions, view_span_deg
 from nerif.io.export import write_json
-from nerif.io.outputs import summary_line, volume_slices, write_masks, write_outputs, write_sensing
+from nerif.io.outputs import RESULTS, summary_line, volume_slices, write_masks, write_outputs, write_sensing
 from nerif.masks import MASKS
 from nerif.solvers import SOLVERS
 
@@ -163,11 +163,12 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
         metrics["total_time_s"] = time.perf_counter() - t_start
         metrics.update(about)
         write_json(metrics, out_dir / "metrics.json")
-    except OSError as e:  # a full disk: one sentence saying what is there
+    except OSError as e:  # a full disk: one sentence saying what is there and what is not
         saved = sorted(p.name for p in out_dir.iterdir() if not p.name.startswith("."))
+        missing = [f for f in RESULTS if f not in saved]
         raise ValueError(f"writing the results to {out_dir} failed ({e.strerror or e}); it holds "
-                         f"{', '.join(saved) or 'nothing'}: free some space and write them again with "
-                         "train.resume=auto") from None
+                         f"{', '.join(saved) or 'nothing'}, not {', '.join(missing)}: free some space and write "
+                         "them again with train.resume=auto") from None
     print(summary_line(metrics, out_dir), flush=True)
     return metrics
 

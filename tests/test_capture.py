@@ -493,3 +493,53 @@ def test_a_pixel_clipped_in_one_exposure_stays_clipped_in_the_mean(tmp_path):
         _write(tmp_path / name, img)
     (mean,), (noise,) = read_exposures([(tmp_path / "a.png", tmp_path / "b.png")], (10, 8))
     assert mean[3, 4] == 1.0 and mean[0, 0] == pytest.approx(100 / 255) and noise > 0
+
+
+def test_a_capture_run_reads_its_rig_file_once_and_again_only_once_it_changed(written, tmp_path, monkeypatch):
+    """Issue 47: one run opened rig.yaml five times (memory estimate, frames, scene). It is now read once a process
+    while it and its calibration file stay as they were; a rewritten rig file is read again, not served stale."""
+    import nerif.data.rig_file as rig_file
+
+    root = Path(_variant(written, tmp_path))
+    reads = []
+    real = rig_file._read_rig_file
+    monkeypatch.setattr(rig_file, "_read_rig_file", lambda path: reads.append(path) or real(path))
+    run(tiny_config("data=capture", f"data.root={root}", "data.binning=8", "train.iterations=2", synthetic=False),
+        tmp_path / "run")
+    assert len(reads) == 1
+    t_max = rig_file.read_rig(root).ambient.T_max
+    assert len(reads) == 1
+    rig = yaml.safe_load((root / RIG_FILE).read_text())
+    rig["T_max"] = t_max + 100.0
+    (root / RIG_FILE).write_text(yaml.safe_dump(rig))
+    assert rig_file.read_rig(root).ambient.T_max == t_max + 100.0 and len(reads) == 2
+
+
+def test_a_second_measurement_of_the_same_images_is_read_back_and_any_change_measures_again(written, tmp_path, caplog, monkeypatch):
+    """Issue 47: every run of a capture ran the optical flow of every view again. Each view's measurement is now
+    kept under ``cache_dir``, keyed by its images' values, masks, grid and settings: the same capture gives the same
+    scene without the flow (the log and each view's ``from_cache`` say so); other settings or another image do not."""
+    import logging
+
+    import nerif.sensing.measurement as measurement
+
+    root = Path(_variant(written, tmp_path))
+    cache = tmp_path / "cache"
+    first = capture(root, FLOW, binning=8, cache_dir=cache)
+    flows = []
+    real = measurement.estimate
+    monkeypatch.setattr(measurement, "estimate", lambda *a, **k: flows.append(1) or real(*a, **k))
+    with caplog.at_level(logging.INFO):
+        again = capture(root, FLOW, binning=8, cache_dir=cache)
+    assert not flows and "read from the cache" in caplog.text
+    assert torch.equal(first.eps, again.eps) and np.array_equal(first.valid_images[0], again.valid_images[0])
+    assert not any(first.measured["from_cache"]) and all(again.measured["from_cache"])
+    assert {k: v for k, v in first.measured.items() if k != "from_cache"} == \
+           {k: v for k, v in again.measured.items() if k != "from_cache"}
+    capture(root, {**FLOW, "normalise_px": 4.0}, binning=8, cache_dir=cache)  # another setting
+    assert len(flows) == first.n_views + 1  # every view, and the held-out one
+    image = root / "distorted_00.png"
+    _write(image, 255 - _read(image))
+    flows.clear()
+    capture(root, FLOW, binning=8, cache_dir=cache)
+    assert len(flows) == 1  # that view alone

@@ -47,9 +47,11 @@ def test_the_image_term_is_least_at_the_true_field_below_the_flows_deflections(r
     truth = cost(eps)
     # the flow's error is what the images do not show: the truth's cost 0.89 (patch 2) and 0.96 (patch 4) of the
     # flow's, its images normalised over 8 px (0.6-0.7 when they were normalised over 2 px, a worse flow). The
-    # chain's warp (PyTorch's bicubic kernel, which shifts by more than asked: issue 39) limits the truth's lead.
+    # chain's pixels, which integrate the displaced pattern where the term samples its reference's spline (issue
+    # 46: 0.22 of no field's cost; below 0.2 when the chain warped by the bicubic kernel, nearly the term's model),
+    # limit the truth's lead.
     assert truth < cost(scene.observed[batch.index])
-    assert truth < 0.6 * min(cost(0.5 * eps), cost(1.5 * eps)) and truth < 0.2 * cost(0 * eps)
+    assert truth < 0.6 * min(cost(0.5 * eps), cost(1.5 * eps)) and truth < 0.3 * cost(0 * eps)
 
 
 def test_the_image_term_starts_on_the_flows_deflections_for_its_warm_up(realistic):
@@ -178,7 +180,7 @@ def test_a_shake_measured_wrong_is_refined_by_the_images_where_the_field_explain
     ph = PHANTOMS.build(group(cfg, "phantom"))
     delta = torch.as_tensor(ph.delta, dtype=torch.float32)
     term = image_term(scene, shake_lr=0.01)
-    binning = term.binning.float()
+    binning = torch.tensor([[view.binning] for view in term.observations], dtype=torch.float32)
     measured = term.shakes_px().float() / binning  # image px
     with torch.no_grad():
         term.shake[0] += torch.tensor([0.3, -0.2])

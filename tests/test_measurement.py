@@ -175,3 +175,17 @@ def test_a_texture_many_pixels_wide_is_measured_on_images_made_smaller():
         else:
             assert error["auto"][2] == 2 and error["auto"][0] < 0.5 * error[1][0], error
             assert abs(error["auto"][1] - 1) < 0.03, error
+
+
+def test_a_set_normalisation_width_is_in_pixels_of_the_images_as_recorded_whatever_the_flow_factor():
+    """Issue 47: ``flow.normalise_px`` set to 6 was applied over 6 px of the images made smaller, i.e. 12 px of the
+    images, and reported as 12 at ``flow_factor`` 2: it now means 6 px of the recorded images at any factor."""
+    k, H, W = 4, 240, 320
+    bg = diffraction_blur(torch.as_tensor(PATTERNS.build({"name": "poisson_disk", "spacing_px": 4.0 * k,
+                                                          "radius_px": 1.2 * k}, height=H, width=W, seed=1)), 2.1 * k)
+    ref = np.float32(bg.numpy())
+    widths = {}
+    for f in (1, 2):
+        m = measure_view(ref, ref, {"name": "farneback", "normalise_px": 6.0}, (30, 40), flow_factor=f, shake=False)
+        widths[f] = (m.found["normalise_px"], m.found["flow_factor"])
+    assert widths == {1: (6.0, 1), 2: (6.0, 2)}

@@ -52,3 +52,24 @@ def test_the_sign_check_says_swapped_only_when_the_views_agree():
                                          "a hot flame; the displacements of the first look wrong") as e:
         check_sign(replace(scene, eps=eps), None)
     assert "swapped" not in str(e.value) and "reversed" not in str(e.value)
+
+
+def test_every_volume_a_solver_shows_is_written_beside_sigma_and_its_temperature(tmp_path, monkeypatch):
+    """Issue 47: the outputs took sigma alone. A solver's :meth:`volumes` (an uncertainty, say) reach
+    ``reconstruction.npz`` and ``.vti`` as they are, beside sigma and the temperature derived from it."""
+    import numpy as np
+
+    from nerif.app import run
+    from nerif.solvers.base import IterativeSolver
+    from tests.helpers import tiny_config
+
+    def volumes(self):
+        sigma = self.reconstruction()
+        return {"sigma": sigma, "sigma_std": np.full_like(sigma, 0.25)}
+
+    monkeypatch.setattr(IterativeSolver, "volumes", volumes)
+    run(tiny_config("train.iterations=2"), tmp_path)
+    with np.load(tmp_path / "reconstruction.npz") as f:
+        assert {"sigma", "sigma_std", "T"} <= set(f.files)
+        assert np.all(f["sigma_std"] == 0.25) and f["sigma_std"].shape == f["sigma"].shape
+    assert 'Name="sigma_std"' in (tmp_path / "reconstruction.vti").read_text()

@@ -80,6 +80,8 @@ def test_parallel_jobs_share_the_cores():
 
 @pytest.mark.skipif(not sys.platform.startswith("linux") or usable_cores() < 2, reason="needs /proc/stat and 2 cores")
 def test_auto_leaves_a_core_that_another_process_keeps_busy():
+    """``auto`` counts the cores other processes keep busy. Where the machine was already busy before the child
+    started (another job: issue 47), the child's core cannot show on top, and ``auto`` must leave a core anyway."""
     idle = busy_cores(0.3)
     p = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
@@ -89,8 +91,9 @@ def test_auto_leaves_a_core_that_another_process_keeps_busy():
     finally:
         p.kill()
         p.wait()
-    assert busy > idle + 0.6, (idle, busy)  # one core's worth, seen from another process
-    assert start <= usable_cores() - 1
+    if idle < usable_cores() - 1.2:  # room for the child's core to show
+        assert busy > idle + 0.6, (idle, busy)  # one core's worth, seen from another process
+    assert start <= usable_cores() - 1, (idle, busy, start)
 
 
 def test_a_near_tie_keeps_the_count_it_has():

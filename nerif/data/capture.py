@@ -30,7 +30,7 @@ from nerif.data.scene import (DATASETS, Scene, ViewImages, found_per_view, heldo
 from nerif.geometry import Camera, rays_in_box
 from nerif.physics import Ambient
 from nerif.sensing.flow import FLOW, check_flow
-from nerif.sensing.measurement import MEASUREMENT
+from nerif.sensing.measurement import MEASUREMENT, measure_cached
 
 log = logging.getLogger(__name__)
 
@@ -142,7 +142,8 @@ def image_pixels(root: str) -> tuple[float, str]:
 
 @DATASETS.register("capture")
 def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto", heldout: Optional[list] = None,
-            frames=None, frame: Optional[int] = None, truth: Optional[str] = None, device: str = "cpu") -> Scene:
+            frames=None, frame: Optional[int] = None, truth: Optional[str] = None, cache_dir=None,
+            device: str = "cpu") -> Scene:
     """A capture folder -> scene of the training views, with the held-out views as ``scene.heldout``.
 
     Args:
@@ -155,6 +156,9 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
             first of the folder).
         truth: a volume file of the true temperature [K] on the probe grid, for a rendered capture (its array
             ``T``): every error against the truth is then reported. None for a real experiment.
+        cache_dir: where each view's measurement is kept (:func:`nerif.sensing.measurement.measure_cached`: keyed
+            by its images' values, masks, grid and settings), so that another run of the same capture skips the
+            optical flow; None: measured every time.
     """
     rig = read_rig(dataset_folder(root))
     FLOW.get(flow["name"])
@@ -184,10 +188,15 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
     hidden = occluder_masks(rig, lambda paths: reference_images([(p,) for p in paths], rig.sensor_px, "occluders")[0])
     check_flow(flow)  # settings that cannot measure say so once, not as an empty view each
     quiet = outside_the_box(cameras, rays)
-    measured = [MEASUREMENT.build(measure, distorted=images[v], reference=refs[v], flow=flow, flame=flames[v],
-                                  hidden=hidden[v], grid_px=(cam.height, cam.width), region=roi, quiet=quiet[v],
-                                  name=cam.name)
-                for v, cam in enumerate(cameras)]
+    measured, cached = zip(*[measure_cached(cache_dir, measure, images[v], refs[v], name=cam.name, flow=flow,
+                                            flame=flames[v], hidden=hidden[v], grid_px=(cam.height, cam.width),
+                                            region=roi, quiet=quiet[v])
+                             for v, cam in enumerate(cameras)])
+    if any(cached):
+        log.info("measurements of %d of %d views read from the cache in %s (the same images, masks and settings "
+                 "measured before; data.cache_dir=null measures again)", sum(cached), len(cached), cache_dir)
+    for m, c in zip(measured, cached):
+        m.found["from_cache"] = bool(c)
     for m, d, r, nd, nr in zip(measured, distorted, references, noise, ref_noise):  # K exposures averaged per image
         m.found.update(exposures=[len(d), len(r)], image_noise=nd, reference_noise=nr)
     if any(len(f) > 1 for f in distorted + references):

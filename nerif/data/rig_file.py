@@ -160,12 +160,42 @@ def _positive(v, what: str) -> float:
     return float(v)
 
 
+_READ: dict = {}  # resolved rig file -> (the stat of each file it was read from, the RigFile): see read_rig
+
+
+def _stats(paths) -> tuple:
+    """(inode, size, mtime_ns, ctime_ns) of each file, None for one that is gone: a file rewritten or replaced
+    differs in one of them."""
+    out = []
+    for p in paths:
+        try:
+            st = Path(p).stat()
+            out.append((st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns))
+        except OSError:
+            out.append(None)
+    return tuple(out)
+
+
 def read_rig(root: Path) -> RigFile:
     """``rig.yaml`` of the capture folder ``root``, checked: format, version, required keys, view and frame lists;
-    one sentence naming the file and the key otherwise."""
+    one sentence naming the file and the key otherwise. Read once a process while the rig file and its calibration
+    file stay as they were (a run's memory estimate, frames and scene, and every frame of a series, share it)."""
     path = Path(root) / RIG_FILE
     if not path.is_file():
         raise FileNotFoundError(f"{path} does not exist: a capture folder needs a {RIG_FILE} beside its images")
+    key = path.resolve()
+    known = _READ.get(key)
+    if known is not None and known[0] == _stats(known[1].sources):
+        return known[1]
+    rig = _read_rig_file(path)
+    if len(_READ) >= 8:
+        _READ.clear()
+    _READ[key] = (_stats(rig.sources), rig)
+    return rig
+
+
+def _read_rig_file(path: Path) -> RigFile:
+    """:func:`read_rig` of the file ``path`` itself, every time."""
     try:
         rig = yaml.safe_load(path.read_text())
     except yaml.YAMLError as e:

@@ -37,18 +37,32 @@ def atomic_write(path: Path, write: Callable[[str], None]) -> Path:
     return path
 
 
+def tensor_bytes(obj) -> int:
+    """The bytes of every tensor in ``obj`` (nested dicts, lists, tuples): about what ``torch.save`` writes."""
+    if isinstance(obj, torch.Tensor):
+        return obj.numel() * obj.element_size()
+    if isinstance(obj, dict):
+        return sum(tensor_bytes(v) for v in obj.values())
+    if isinstance(obj, (list, tuple)):
+        return sum(tensor_bytes(v) for v in obj)
+    return 0
+
+
 def atomic_save_torch(obj, path: Path) -> Path:
-    """``torch.save`` of ``obj`` to ``path``, atomically; a failed write is an :class:`OSError`, as any other file's
-    (torch's zip writer reports a full disk as a RuntimeError: "PytorchStreamWriter failed writing file")."""
+    """``torch.save`` of ``obj`` to ``path``, atomically; a failed write is an :class:`OSError`, as any other file's.
+    torch's zip writer reports a full disk in several words ("PytorchStreamWriter failed writing file", "[enforce
+    fail at inline_container.cc] . unexpected pos"): the cause is read from the file system instead, a disk with
+    less free space than the object's tensors being full whatever the message."""
     def write(tmp):
         try:
             torch.save(obj, tmp)
         except RuntimeError as e:
-            if "writ" not in str(e):  # not a failed write: a bug, as it is
+            free = shutil.disk_usage(Path(tmp).parent).free  # the partial file still holds its share
+            if free < max(1 << 20, tensor_bytes(obj)):
+                raise OSError(errno.ENOSPC, f"No space left on device ({free / 2**20:.1f} MiB free)") from e
+            if "inline_container" not in str(e) and "writ" not in str(e):  # not a failed write: a bug, as it is
                 raise
-            full = shutil.disk_usage(Path(tmp).parent).free < 1 << 20
-            raise OSError(errno.ENOSPC if full else errno.EIO,
-                          "No space left on device" if full else str(e).strip().splitlines()[-1]) from e
+            raise OSError(errno.EIO, str(e).strip().splitlines()[-1]) from e
 
     return atomic_write(path, write)
 

@@ -18,6 +18,8 @@ from nerif.io.export import write_npz, write_png, write_vti
 from nerif.io.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
 
 log = logging.getLogger(__name__)
+# the files every run writes (held-out figures, masks and sensing pictures beside them where there are any)
+RESULTS = ("reconstruction.npz", "reconstruction.vti", "slices.png", "curves.png", "metrics.json")
 
 
 def write_masks(masks, scene, out_dir: Path) -> None:
@@ -97,8 +99,8 @@ def failed_fit(m: dict) -> str:
 def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     """Volumes (.npz, .vti), slice and curve PNGs, held-out figures, and the metrics of the final state."""
     amb, box = scene.ambient, scene.box
-    sigma = solver.reconstruction()
-    vols = {"sigma": sigma}
+    vols = dict(solver.volumes())
+    sigma = vols["sigma"]
     if amb.temperature_known:
         vols.update(T=amb.temperature_from_sigma(sigma), n=amb.n_from_sigma(sigma), delta=sigma * amb.delta_thre)
     if scene.truth_T is not None:

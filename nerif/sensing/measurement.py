@@ -10,6 +10,7 @@ the flow, :mod:`~nerif.sensing.shake` (the camera's rigid motion between the exp
 """
 from __future__ import annotations
 
+import json
 import logging
 from dataclasses import dataclass, field
 from typing import Optional
@@ -17,6 +18,7 @@ from typing import Optional
 import cv2
 import numpy as np
 
+from nerif.cache import cached_arrays, content_digest
 from nerif.registry import Registry
 from nerif.sensing.flame_light import without_flame_light
 from nerif.sensing.flow import estimate, texture_scale_px, texture_width
@@ -203,6 +205,8 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
         valid &= ~lost
     if flame is not None:
         distorted = without_flame_light(distorted, flame)
+    if isinstance(flow.get("normalise_px"), (int, float)):  # set in px of the images as recorded
+        flow = {**flow, "normalise_px": flow["normalise_px"] / f}
     u_small, normalise_px = estimate(flow, shrunk(distorted, f), small, width)
     u_image = enlarged(u_small, H, W)
     found["normalise_px"] = f * normalise_px if normalise_px else normalise_px
@@ -224,9 +228,18 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     found.update(displacement_max_px=peak, valid_fraction=float(valid.mean()),
                  outside_px=outside_reach(u, valid, quiet),
                  noise=noise_of(distorted, reference, u_image, valid, quiet, f * width))
+    say(found, name, region)
+    return ViewMeasurement(u, valid, found, distorted, u_image if keep_flow else None)
+
+
+def say(found: dict, name: str, region: Optional[np.ndarray] = None) -> None:
+    """The log's line of one view's measurement (``found``, :class:`ViewMeasurement`'s), and a warning where it
+    keeps less than :data:`LOST_WARNING` of its ``region`` (None: the whole view), naming the causes."""
     left = ", ".join(f"{100 * found[k]:.1f} % {k}" for k in ("saturated", "occluded", "unmeasured", "rejected")
                      if found[k] > 0)
-    log.info("%s: displacement up to %.2f px; shake (%+.3f, %+.3f) px taken off%s%s", name or "view", peak, s[0], s[1],
+    s = found["shake_px"]
+    log.info("%s: displacement up to %.2f px; shake (%+.3f, %+.3f) px taken off%s%s", name or "view",
+             found["displacement_max_px"], s[0], s[1],
              f"; flow normalised over {found['normalise_px']:.1f} px" if found["normalise_px"] else "",
              f"; left out: {left}" if left else "")
     region_share = float(np.mean(region)) if region is not None else 1.0
@@ -234,4 +247,41 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
         log.warning("%s: %.0f %% of its region of interest has no usable displacement (%s): look at its images; "
                     "the settings are measure.* and flow.*", name or "view",
                     100 * (1 - found["valid_fraction"] / region_share), left)
-    return ViewMeasurement(u, valid, found, distorted, u_image if keep_flow else None)
+
+
+def measure_cached(cache_dir, measure: dict, distorted: np.ndarray, reference: np.ndarray, name: str = "",
+                   **inputs) -> tuple[ViewMeasurement, bool]:
+    """``MEASUREMENT.build(measure, ...)`` of one view, stored under ``cache_dir`` and read back from there when the
+    same images (their values), the same masks and grid and the same settings (``measure``, ``flow``) are measured
+    again by the same measurement code (:func:`nerif.cache.cached_arrays`); ``cache_dir=None`` always measures.
+
+    Args:
+        inputs: the other arguments of :func:`measure_view` (``flow``, ``grid_px``, ``region``, ``quiet``,
+            ``flame``, ``hidden``, ...), arrays or settings.
+    Returns:
+        the view's measurement and whether it was read from the cache (then its log line is said again).
+    """
+    def key(x):
+        return content_digest(np.asarray(x)) if isinstance(x, np.ndarray) else x
+
+    computed = []
+
+    def compute() -> dict:
+        m = MEASUREMENT.build(measure, distorted=distorted, reference=reference, name=name, **inputs)
+        computed.append(m)
+        arrays = {"displacement": m.displacement, "valid": m.valid, "found": np.array(json.dumps(m.found, default=float))}
+        if m.distorted is not distorted:  # the flame's light taken off: not the image given
+            arrays["distorted"] = m.distorted
+        if m.flow is not None:
+            arrays["flow"] = m.flow
+        return arrays
+
+    payload = {"measure": measure, "distorted": key(distorted), "reference": key(reference),
+               **{k: key(v) for k, v in sorted(inputs.items())}}
+    arrays = cached_arrays(cache_dir, "measured", payload, compute)
+    if computed:
+        return computed[0], False
+    found = json.loads(str(arrays["found"]))
+    say(found, name, inputs.get("region"))
+    return ViewMeasurement(arrays["displacement"], arrays["valid"], found, arrays.get("distorted", distorted),
+                           arrays.get("flow")), True

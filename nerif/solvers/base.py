@@ -202,6 +202,17 @@ class IterativeSolver:
         or None where the solver refines none (the measurement stage's stand)."""
         return None
 
+    def reconstruction(self) -> np.ndarray:
+        """(nx, ny, nz) sigma on the probe grid: the field as it stands."""
+        raise NotImplementedError
+
+    def volumes(self) -> dict[str, np.ndarray]:
+        """Every volume on the probe grid the solver has to show, each (nx, ny, nz) in the unit of sigma unless its
+        name says otherwise: ``sigma`` (:meth:`reconstruction`) here, and what a solver adds (an uncertainty, a
+        count of views); :func:`nerif.io.outputs.write_outputs` writes them all, and the temperature of
+        ``sigma``."""
+        return {"sigma": self.reconstruction()}
+
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
         """Deflections of sigma (R, 3) of rays (R, 3) through the current reconstruction, in the unit of
         ``scene.observed``; only their part perpendicular to the rays when the scene's observations are

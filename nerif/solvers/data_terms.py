@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from nerif.data import Scene
+from nerif.data.observation import observations
 from nerif.losses import deflection_terms
 from nerif.losses.images import bandpass, cell_origin, cell_weights, photometric_residual, photometric_scale
 from nerif.registry import Registry
@@ -210,7 +211,8 @@ class ImageTerm(DeflectionTerm):
         k = self.k
         patch = torch.full((len(scene.dirs), k * k), -1, dtype=torch.long, device=device)  # rays of each patch
         gain, scale, refs, dists = [], [], [], []
-        for v, (cam, im) in enumerate(zip(scene.cameras, scene.images)):
+        self.observations = observations(scene)
+        for v, (cam, view) in enumerate(zip(scene.cameras, self.observations)):
             sl = scene.view_slice(v)
             pixel = scene.pixel[sl]
             lut = torch.full((cam.height * cam.width,), -1, dtype=torch.long, device=device)
@@ -220,15 +222,15 @@ class ImageTerm(DeflectionTerm):
                 dr, dc = divmod(j, k)
                 inside = (col + dc < cam.width) & (row + dr < cam.height)
                 patch[sl][inside, j] = lut[(pixel + dr * cam.width + dc)[inside]]
-            A = scene.gain[sl] * (scene.scale / im.camera.binning)  # image px per unit of sigma
-            ref = bandpass(im.reference, self.highpass_px, self.lowpass_px)
+            A = view.gain_px  # image px per unit of sigma
+            ref = bandpass(view.reference, self.highpass_px, self.lowpass_px)
             if self.mode == "bspline":  # sampled through its spline's coefficients (:func:`~nerif.sensing.imaging.sample`)
                 ref = bspline_coefficients(ref)
             gain.append(A.float())
             scale.append(photometric_scale(ref, A, mode=self.mode))
             # the views one above the other, MARGIN rows of border between them: one sampling call per step
             refs.append(torch.nn.functional.pad(ref[None, None], (0, 0, MARGIN, MARGIN), mode="replicate")[0, 0])
-            dists.append(torch.nn.functional.pad(bandpass(im.distorted, self.highpass_px, self.lowpass_px)[None, None],
+            dists.append(torch.nn.functional.pad(bandpass(view.distorted, self.highpass_px, self.lowpass_px)[None, None],
                                                  (0, 0, MARGIN, MARGIN), mode="replicate")[0, 0])
         self.b, self.rows = b, H + 2 * MARGIN
         # the images' information grows with the pixels a cell holds, the flow's does not
@@ -237,8 +239,7 @@ class ImageTerm(DeflectionTerm):
         # what a unit of each view's squared residual is worth (:func:`view_scales`), per ray (N,)
         self.scale = view_scales(scale, self.flow.view_weight).float().to(device).repeat_interleave(scene.view_counts())
         # each view's shake between the exposures, which the images hold and the field does not [image px]
-        self.binning = torch.tensor([[im.camera.binning] for im in scene.images], dtype=torch.float64, device=device)
-        self.shake = (scene.shake_px() / self.binning).float()
+        self.shake = torch.stack([view.shake_px for view in self.observations]).float()
         self.shake_correction = torch.zeros_like(self.shake, requires_grad=self.shake_lr > 0)  # fitted with the field
         self.reference, self.distorted = torch.cat(refs), torch.cat(dists)  # (V (H + 2 MARGIN), W)
         self.weights, self.pixel_offsets = cell_weights(b, torch.float32, device)
@@ -324,7 +325,8 @@ class ImageTerm(DeflectionTerm):
     def shakes_px(self) -> Optional[torch.Tensor]:
         if not self.refines:
             return None
-        return ((self.shake + self.shake_correction.detach()).double() * self.binning).cpu()
+        shakes = (self.shake + self.shake_correction.detach()).double()
+        return torch.stack([view.sensor_px(s) for view, s in zip(self.observations, shakes)]).cpu()
 
     def state_dict(self) -> dict:
         return {"shake_correction": self.shake_correction.detach().clone()} if self.refines else {}

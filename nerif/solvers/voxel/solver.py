@@ -13,7 +13,7 @@ from nerif.geometry import box_faces
 from nerif.renderers.deflection import perpendicular
 from nerif.renderers.voxel import voxel_deflection
 from nerif.solvers.base import SOLVERS, IterativeSolver, check_faces
-from nerif.solvers.data_terms import ImageTerm
+from nerif.solvers.data_terms import DATA_TERMS, noise_weights
 from nerif.solvers.voxel.cgls import CGLS, REGULARIZERS
 from nerif.solvers.voxel.projector import PROJECTORS, SparseProjector
 from nerif.solvers.voxel.unified import unified_system
@@ -45,8 +45,17 @@ def built_projector(name: str, box, origins: torch.Tensor, dirs: torch.Tensor, s
     return _LAST_PROJECTOR["projector"]
 
 
-NEURAL_ONLY = ("interpolation", "patch", "flow_weight", "flow_warmup", "image_iterations", "image_lr",
-               "choose_by_heldout")  # data_term settings of the neural image term
+# the data_term settings CGLS reads (two-step and unified BOS); any other one set away from its default is refused
+VOXEL_READS = ("name", "highpass_px", "lowpass_px", "noise_weighted")
+
+
+def settings_not_read(data_term: Mapping) -> list[str]:
+    """``data_term.KEY=VALUE`` of each setting of ``data_term`` that CGLS does not read (not in :data:`VOXEL_READS`)
+    and that differs from its data term's default (the registered class's): a new setting of a data term is
+    refused here until CGLS reads it."""
+    defaults = inspect.signature(DATA_TERMS.get(data_term["name"]).__init__).parameters
+    return [f"data_term.{k}={v}" for k, v in data_term.items()
+            if k not in VOXEL_READS and (k not in defaults or v != defaults[k].default)]
 
 
 @SOLVERS.register("cgls")
@@ -96,13 +105,11 @@ class CGLSSolver(IterativeSolver):
         if self.data_term["name"] not in ("flow", "images", "auto"):
             raise ValueError(f"solver=cgls fits data_term=flow (or auto: the same), or images (unified BOS), got "
                              f"'{self.data_term['name']}'")
-        defaults = inspect.signature(ImageTerm.__init__).parameters
-        unused = [f"data_term.{k}={self.data_term[k]}" for k in NEURAL_ONLY
-                  if k in self.data_term and self.data_term[k] != defaults[k].default]
+        unused = settings_not_read(self.data_term)
         if unused:
             raise ValueError(f"{', '.join(unused)}: solver=cgls does not use {'it' if len(unused) == 1 else 'them'} "
                              "(the neural solver's image term does; unified BOS, data_term=images, takes "
-                             "data_term.highpass_px and lowpass_px)")
+                             "data_term.highpass_px and lowpass_px; both weigh the views by data_term.noise_weighted)")
         if linearize_at not in ("zero", "flow"):
             raise ValueError(f"solver.linearize_at must be zero or flow, got '{linearize_at}'")
         self.linearize_at = linearize_at
@@ -132,17 +139,22 @@ class CGLSSolver(IterativeSolver):
         d = scene.dirs.to(dt)
         # auto: two-step, which measured better than unified on the independent capture (benchmarks/RESULTS.md)
         self.fitted = "images" if self.data_term["name"] == "images" else "flow"
+        # each ray's rows times sqrt(w_v): the views weighed by their images' noise (maximum likelihood)
+        w = noise_weights(scene) if self.data_term.get("noise_weighted", True) else None
+        self.row_weight = None if w is None else w.to(self.device, dt)[scene.ray_views()].sqrt()[:, None]  # (N, 1)
+        rw = 1.0 if self.row_weight is None else self.row_weight
         if self.fitted == "images":  # unified BOS: rows of the images' linearised equations
             self.labels["data_term"] = "images"
             M, c = unified_system(scene, self.data_term.get("highpass_px"), self.linearize_at,
                                   lowpass_px=self.data_term.get("lowpass_px"))
-            M, b = M.to(dt), c.to(dt)
+            M, b = M.to(dt) * (rw if w is None else rw[..., None]), c.to(dt) * rw
             P = (lambda e: (M @ e[..., None])[..., 0])
             Pt = (lambda y: (M.transpose(1, 2) @ y[..., None])[..., 0])
         else:
-            b = scene.observed.to(dt)
-            P = (lambda e: perpendicular(e, d)) if scene.perpendicular_only else (lambda e: e)
-            Pt = P  # symmetric: (P A)^T = A^T P
+            b = scene.observed.to(dt) * rw
+            project = (lambda e: perpendicular(e, d)) if scene.perpendicular_only else (lambda e: e)
+            P = (lambda e: project(e) * rw)
+            Pt = P  # symmetric: (W P A)^T = A^T P W, W diagonal
 
         def Ax(x):
             return P(self.projector.Ax(x))
@@ -176,7 +188,9 @@ class CGLSSolver(IterativeSolver):
         if self.fitted == "images":  # the residual is photometric: deflections on the evaluation rays
             m["deflection_rmse"] = ev.deflection_errors({"cgls": self.predict(*ev.train_rays())})["deflection_rmse_cgls"]
         else:
-            r = self.cgls.r * self.scene.scale  # data residual [rad]
+            r = self.cgls.r * self.scene.scale  # data residual [rad], weighed as the rows are
+            if self.row_weight is not None:
+                r = r / self.row_weight
             m["deflection_rmse"] = float((r.double() ** 2).sum(-1).mean().sqrt())
         m.update(relative_residual=self.cgls.residual(), **ev.heldout_errors(self.predict))
         self.history.append(m)

@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import torch
 
-from nerif.losses.images import bandpass, block_pixels, photometric_scale
+from nerif.data.observation import observations
+from nerif.losses.images import bandpass, photometric_scale
 from nerif.sensing.imaging import sample
 
 
@@ -44,13 +45,13 @@ def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: floa
         raise ValueError(f"solver=cgls data_term=images: rays binned {scene.cameras[0].binning} are not a whole number "
                          f"of image pixels (images binned {scene.images[0].camera.binning}) in every view")
     Ms, cs = [], []
-    for v, (cam, im) in enumerate(zip(scene.cameras, scene.images)):
-        sl = scene.view_slice(v)
-        A = scene.gain[sl] * (scene.scale / im.camera.binning)  # (n, 2, 3) image px per sigma unit
-        ref, dist = (bandpass(i.double(), highpass_px, lowpass_px) for i in (im.reference, im.distorted))
-        x = block_pixels(scene.pixel[sl], cam.width, b).double()  # (n, P, 2)
-        u0 = scene.displacement_px[sl].double() / im.camera.binning if linearize_at == "flow" else A.new_zeros(len(A), 2)
-        shake = scene.shake_px()[v] / im.camera.binning  # the view's shake, which the images hold
+    for view in observations(scene):
+        A = view.gain_px  # (n, 2, 3) image px per sigma unit
+        ref, dist = (bandpass(i.double(), highpass_px, lowpass_px) for i in (view.reference, view.distorted))
+        x = view.pixels().double()  # (n, P, 2)
+        u0 = view.image_px(scene.displacement_px[view.rays].double()) if linearize_at == "flow" else \
+            A.new_zeros(len(A), 2)
+        shake = view.shake_px  # the view's shake, which the images hold
         p = (x + u0[:, None, :] + shake.to(x.dtype)).reshape(-1, 2)
         grads = [(sample(ref, p + step_px * p.new_tensor(e)) - sample(ref, p - step_px * p.new_tensor(e))) / (2 * step_px)
                  for e in ((1.0, 0.0), (0.0, 1.0))]

@@ -1,0 +1,68 @@
+"""What one view's camera records of a field: the one place a field's deflections become the pixels of that view's
+images, for every consumer that compares a field with the images (the image term, unified BOS, the held-out
+image residual).
+
+Units, converted here and nowhere else: deflections in units of sigma (``Scene.observed``'s) or radians; image
+displacements in pixels of the full sensor (what the measurement stage reports, ``Scene.displacement_px``) or in
+pixels of the view's images (``image px``: the grid its ``ViewImages`` hold, ``binning`` sensor pixels a side).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from nerif.losses.images import block_pixels
+
+
+@dataclass(frozen=True)
+class ViewObservation:
+    """One view's observation model on the image grid.
+
+    Attributes:
+        view: the view's index in its scene. rays: its rays' slice of the scene's.
+        pixel: (n,) each ray's flat pixel index on the ray grid, ``width`` wide.
+        gain_px: (n, 2, 3) float64: image displacement [image px] per unit of sigma deflection of each ray.
+        shake_px: (2,) float64: the camera's rigid shift between the exposures [image px], which the images hold
+            and the field does not.
+        binning: sensor pixels a side of an image pixel. block: image pixels a ray spans across (``b``), or None
+            where the rays are not a whole number of image pixels apart.
+        reference, distorted: (H, W) the view's images, intensities in [0, 1].
+    """
+
+    view: int
+    rays: slice
+    pixel: torch.Tensor
+    width: int
+    gain_px: torch.Tensor
+    shake_px: torch.Tensor
+    binning: int
+    block: int | None
+    reference: torch.Tensor
+    distorted: torch.Tensor
+
+    def image_px(self, u_sensor_px: torch.Tensor) -> torch.Tensor:
+        """(..., 2) displacements [px of the full sensor] -> [image px]."""
+        return u_sensor_px / self.binning
+
+    def sensor_px(self, u_image_px: torch.Tensor) -> torch.Tensor:
+        """(..., 2) displacements [image px] -> [px of the full sensor]."""
+        return u_image_px * self.binning
+
+    def pixels(self, pixel: torch.Tensor | None = None) -> torch.Tensor:
+        """(n, b^2, 2) the image pixels (column, row) of the blocks of rays ``pixel`` (their flat ray-grid indices;
+        default: every ray of the view), row-major from each block's top-left pixel."""
+        return block_pixels(self.pixel if pixel is None else pixel, self.width, self.block)
+
+
+def observations(scene) -> list[ViewObservation]:
+    """Each view's :class:`ViewObservation` of ``scene`` (a :class:`nerif.data.scene.Scene` with images)."""
+    if scene.images is None:
+        raise ValueError("an observation model on the image grid needs the views' background images")
+    b, shakes, out = scene.image_block(), scene.shake_px(), []
+    for v, (cam, im) in enumerate(zip(scene.cameras, scene.images)):
+        sl = scene.view_slice(v)
+        out.append(ViewObservation(v, sl, scene.pixel[sl], cam.width,
+                                   scene.gain[sl] * (scene.scale / im.camera.binning), shakes[v] / im.camera.binning,
+                                   im.camera.binning, b, im.reference, im.distorted))
+    return out
