@@ -1,6 +1,8 @@
 """A tiny scene that trains in seconds on a CPU, building a solver from a config as the app does, and the project's
 shared captures where they are."""
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -28,6 +30,7 @@ def solver(cfg, scene, masks=None):
     return SOLVERS.build(group(cfg, "solver")).setup(scene, masks if masks is not None else Masks())
 
 
+ROOT = Path(__file__).resolve().parents[1]  # the clone
 SHARED = Path(os.environ.get("NERIF_SHARED", Path(__file__).resolve().parents[2] / "shared")) / "data"
 
 
@@ -39,3 +42,37 @@ def shared_data(name: str) -> Path:
         pytest.skip(f"the project's shared data are not beside this clone ({SHARED}; set NERIF_SHARED to the folder "
                     "holding data/): tests of the shared captures skipped")
     return path
+
+
+def nerif_here(*args, cwd=ROOT) -> subprocess.CompletedProcess:
+    """``python -m nerif ARGS`` in this process (no 6-8 s of imports): ``sys.argv`` set, what it prints captured,
+    the status its ``SystemExit`` carries (0 where it returns). Hydra's state and the logging handlers it installs
+    (which write to the captured streams) are put back afterwards."""
+    import contextlib
+    import io
+    import logging
+
+    from hydra.core.global_hydra import GlobalHydra
+
+    from nerif.__main__ import cli
+
+    out, err, code = io.StringIO(), io.StringIO(), 0
+    argv, here, handlers = sys.argv, os.getcwd(), list(logging.getLogger().handlers)
+    try:
+        sys.argv = ["nerif", *args]
+        os.chdir(cwd)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                cli()
+            except SystemExit as e:
+                code = e.code if isinstance(e.code, int) else int(e.code is not None)
+    finally:
+        sys.argv = argv
+        os.chdir(here)
+        GlobalHydra.instance().clear()
+        root = logging.getLogger()
+        for h in root.handlers:
+            if h not in handlers:
+                h.close()
+        root.handlers[:] = handlers
+    return subprocess.CompletedProcess(["nerif", *args], code, out.getvalue(), err.getvalue())

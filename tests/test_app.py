@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from tests.helpers import TINY
+from tests.helpers import TINY, nerif_here
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -21,40 +21,6 @@ ROOT = Path(__file__).resolve().parents[1]
 def nerif(*args, cwd):
     """``python -m nerif ARGS`` in a new Python: for the exit status, signals and the no-traceback contract."""
     return subprocess.run([sys.executable, "-m", "nerif", *args], cwd=cwd, capture_output=True, text=True, timeout=600)
-
-
-def nerif_here(*args, cwd=ROOT) -> subprocess.CompletedProcess:
-    """``python -m nerif ARGS`` in this process (no 6-8 s of imports): ``sys.argv`` set, what it prints captured,
-    the status its ``SystemExit`` carries (0 where it returns). Hydra's state and the logging handlers it installs
-    (which write to the captured streams) are put back afterwards."""
-    import contextlib
-    import io
-    import logging
-
-    from hydra.core.global_hydra import GlobalHydra
-
-    from nerif.__main__ import cli
-
-    out, err, code = io.StringIO(), io.StringIO(), 0
-    argv, here, handlers = sys.argv, os.getcwd(), list(logging.getLogger().handlers)
-    try:
-        sys.argv = ["nerif", *args]
-        os.chdir(cwd)
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            try:
-                cli()
-            except SystemExit as e:
-                code = e.code if isinstance(e.code, int) else int(e.code is not None)
-    finally:
-        sys.argv = argv
-        os.chdir(here)
-        GlobalHydra.instance().clear()
-        root = logging.getLogger()
-        for h in root.handlers:
-            if h not in handlers:
-                h.close()
-        root.handlers[:] = handlers
-    return subprocess.CompletedProcess(["nerif", *args], code, out.getvalue(), err.getvalue())
 
 
 def multirun(tmp_path, *overrides, here: bool = True):
@@ -240,7 +206,7 @@ def test_a_realistic_run_writes_its_images_and_displacement_error(tmp_path):
 @pytest.mark.slow
 def test_the_default_scene_reaches_the_target_error(tmp_path):
     """`python -m nerif` as a new user runs it: hash + discrete on Phantom 5 under 25 K temperature RMSE."""
-    r = nerif("train.progress=false", f"hydra.run.dir={tmp_path}", cwd=ROOT)
+    r = nerif_here("train.progress=false", f"hydra.run.dir={tmp_path}")
     assert r.returncode == 0, r.stderr[-2000:]
     m = json.loads((tmp_path / "metrics.json").read_text())
     assert m["encoder"] == "hash" and m["grad"] == "discrete" and m["iterations"] == 1200
@@ -248,7 +214,7 @@ def test_the_default_scene_reaches_the_target_error(tmp_path):
 
 
 @pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130), (signal.SIGUSR2, 140)])
-def test_a_signal_saves_a_checkpoint_says_so_in_one_line_and_the_run_resumes(tmp_path, signum, code):
+def test_a_signal_saves_a_checkpoint_says_so_in_one_line_and_the_run_resumes(tmp_path, monkeypatch, signum, code):
     """SIGTERM (Slurm preemption, timeout, a container stop) and SIGUSR2 (Slurm's time-limit warning) as Ctrl-C:
     a checkpoint, one warning, no traceback; the run continues from it by path, and in the same folder with
     ``train.resume=auto`` or as a requeued Slurm job (``SLURM_RESTART_COUNT``)."""
@@ -268,23 +234,22 @@ def test_a_signal_saves_a_checkpoint_says_so_in_one_line_and_the_run_resumes(tmp
     assert "Traceback" not in out and out.count("checkpoint saved to") == 1, out
     done = torch.load(tmp_path / "checkpoint.pt", weights_only=False)["iteration"]
     assert done > 0
-    r = nerif(*TINY, f"train.resume={tmp_path / 'checkpoint.pt'}", f"train.iterations={done + 5}",
-              f"hydra.run.dir={tmp_path / 'resumed'}", cwd=ROOT)
+    r = nerif_here(*TINY, f"train.resume={tmp_path / 'checkpoint.pt'}", f"train.iterations={done + 5}",
+                   f"hydra.run.dir={tmp_path / 'resumed'}")  # the resumes in this process: the signal's was a new one
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "resumed" / "metrics.json").read_text())["iterations"] == done + 5
     if signum == signal.SIGUSR2:  # the same folder: by auto, then as a requeued job without any setting
-        r = nerif(*TINY, "train.resume=auto", f"train.iterations={done + 3}", f"hydra.run.dir={tmp_path}", cwd=ROOT)
+        r = nerif_here(*TINY, "train.resume=auto", f"train.iterations={done + 3}", f"hydra.run.dir={tmp_path}")
         assert r.returncode == 0 and f"at iteration {done}" in r.stdout + r.stderr, r.stderr
-        r = subprocess.run([sys.executable, "-m", "nerif", *TINY, f"train.iterations={done + 6}",
-                            f"hydra.run.dir={tmp_path}"], cwd=ROOT, capture_output=True, text=True, timeout=600,
-                           env={**os.environ, "SLURM_RESTART_COUNT": "1"})
+        monkeypatch.setenv("SLURM_RESTART_COUNT", "1")
+        r = nerif_here(*TINY, f"train.iterations={done + 6}", f"hydra.run.dir={tmp_path}")
         assert r.returncode == 0 and f"at iteration {done + 3}" in r.stdout + r.stderr, r.stderr
         assert json.loads((tmp_path / "metrics.json").read_text())["iterations"] == done + 6
 
 
 
 def test_a_flame_free_scene_writes_strict_json_and_an_honest_summary_line(tmp_path):
-    r = nerif(*TINY, "phantom.T_peak=296.15", "mask=none", "train.iterations=5", f"hydra.run.dir={tmp_path}", cwd=ROOT)
+    r = nerif_here(*TINY, "phantom.T_peak=296.15", "mask=none", "train.iterations=5", f"hydra.run.dir={tmp_path}")
     assert r.returncode == 0, r.stderr
 
     def refuse(token):

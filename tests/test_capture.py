@@ -190,13 +190,11 @@ def test_swapped_reference_and_distorted_images_are_refused_before_training(writ
 
 def test_no_held_out_view_trains_on_every_view_and_a_rig_setting_is_refused(written, tmp_path):
     """Issue 28: data.heldout=[] failed after the flow; rig.binning=4 with a capture was ignored without a word."""
-    import subprocess
-    import sys
+    from tests.helpers import nerif_here
 
     every = capture(str(written[0]), FLOW, binning=8, heldout=[])
     assert every.n_views == 7 and every.heldout is None
-    r = subprocess.run([sys.executable, "-m", "nerif", "data=capture", f"data.root={written[0]}", "rig.binning=4",
-                        f"hydra.run.dir={tmp_path}"], capture_output=True, text=True, timeout=300)
+    r = nerif_here("data=capture", f"data.root={written[0]}", "rig.binning=4", f"hydra.run.dir={tmp_path}")
     assert r.returncode == 2 and "Traceback" not in r.stderr + r.stdout
     assert "rig.binning=4: rig.* describes the synthetic rig; data=capture takes its cameras from its own files (the " \
            "binning of recorded data is data.binning)" in r.stderr + r.stdout

@@ -116,7 +116,8 @@ def test_the_flow_is_normalised_narrowly_only_where_the_flames_light_is_seen():
     measures a clean pair best. (Light at 10 %, which costs the flow nothing at 8 px, stays below.)"""
     import cv2
 
-    from nerif.sensing.flow import AUTO_WIDTH_RANGE_PX, estimate, texture_width
+    from nerif.sensing.flow import estimate
+    from nerif.sensing.texture import AUTO_WIDTH_RANGE_PX, texture_width
 
     clean, reference, _ = flame_pair(0.0)
     width = texture_width(reference)

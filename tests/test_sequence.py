@@ -97,15 +97,12 @@ def test_frame_ranges_as_jobs_of_a_multirun(tmp_path):
     """``-m data.frames=[0,1],[2]``: one job per range, each a series of its own (its first frame cold), every
     job a row of the sweep's summary."""
     import csv
-    import subprocess
-    import sys
 
-    from tests.helpers import TINY
+    from tests.helpers import TINY, nerif_here
 
     base = [o for o in TINY if not o.startswith(("phantom", "rig.", "data."))] + FLICKER
     sweep = tmp_path / "sweep"
-    r = subprocess.run([sys.executable, "-m", "nerif", "-m", *base, "sequence.iterations=5", "data.frames=[0,1],[2]",
-                        f"hydra.sweep.dir={sweep}"], capture_output=True, text=True, timeout=600)
+    r = nerif_here("-m", *base, "sequence.iterations=5", "data.frames=[0,1],[2]", f"hydra.sweep.dir={sweep}")
     assert r.returncode == 0, r.stderr[-2000:]
     rows = list(csv.DictReader((sweep / "summary.csv").open()))
     assert sorted(row["config"].split()[-1] for row in rows) == ["data.frames=[0,1]", "data.frames=[2]"]

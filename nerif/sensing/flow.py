@@ -15,41 +15,9 @@ import numpy as np
 from nerif.registry import Registry
 from nerif.sensing.flame_light import LIGHT_SEEN, light_structure
 from nerif.sensing.imaging import to_uint8
+from nerif.sensing.texture import AUTO_WIDTH_RANGE_PX, texture_width
 
 FLOW = Registry("optical flow", package="nerif.sensing")
-
-
-AUTO_WIDTH_PER_SCALE = 1.5  # normalise_px=auto: this many of the texture's correlation lengths
-AUTO_WIDTH_RANGE_PX = (1.5, 8.0)
-
-
-def texture_scale_px(image: np.ndarray) -> float:
-    """The correlation length [px] of a background's texture: for a random texture with a Gaussian
-    autocorrelation of width ``l``, ``l = sqrt(2) std(I) / rms |grad I|``, taken on the image less its Gaussian blur
-    of 8 px (its illumination), or of 4 such lengths where that is more (a coarse texture, of which a blur of 8 px
-    takes a part for illumination). Measured: 1.45 px on the shared captures' texture, 1.34 and 1.40 on the
-    Poisson-disk and wavelet patterns; 3.19 on the shared flame written at 4x finer pixels and 7.2 at 10.5x finer
-    (3.12 and 5.31 over 8 px alone)."""
-    img = np.float32(image)
-
-    def scale(blur_px: float) -> float:
-        detail = img - cv2.GaussianBlur(img, (0, 0), blur_px)
-        gy, gx = np.gradient(detail)
-        grad = float(np.sqrt(np.mean(gx * gx + gy * gy)))
-        return float(np.sqrt(2.0) * detail.std() / grad) if grad > 0 else AUTO_WIDTH_RANGE_PX[1]
-
-    first = scale(8.0)
-    return scale(4 * first) if 4 * first > 8.0 else first
-
-
-def texture_width(reference: np.ndarray, scale_px: Optional[float] = None) -> float:
-    """The texture's own width [px]: :data:`AUTO_WIDTH_PER_SCALE` correlation lengths of ``reference``'s texture
-    (:func:`texture_scale_px`, or ``scale_px`` where the caller has it) within :data:`AUTO_WIDTH_RANGE_PX`; the
-    scale over which the detectors of :mod:`nerif.sensing.measurement` look, and the flow's normalisation where the
-    flame's light is seen."""
-    lo, hi = AUTO_WIDTH_RANGE_PX
-    scale = texture_scale_px(reference) if scale_px is None else scale_px
-    return float(np.clip(AUTO_WIDTH_PER_SCALE * scale, lo, hi))
 
 
 def warped(reference: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -142,3 +142,23 @@ def resample(u: np.ndarray, height: int, width: int) -> np.ndarray:
     shrink = height < u.shape[0]
     out = cv2.resize(u, (width, height), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
     return out.reshape((height, width) + u.shape[2:])  # OpenCV drops a single channel's axis
+
+
+def shrunk(image: np.ndarray, factor: int) -> np.ndarray:
+    """(H, W) -> (H // factor, W // factor) area means (the image itself for 1): a texture ``factor`` times finer in
+    pixels, the noise averaged down."""
+    if factor == 1:
+        return image
+    H, W = image.shape
+    return cv2.resize(np.float32(image), (max(W // factor, 1), max(H // factor, 1)), interpolation=cv2.INTER_AREA)
+
+
+def enlarged(a: np.ndarray, H: int, W: int) -> np.ndarray:
+    """A mask (h, w) bool (nearest) or a flow (h, w, 2) [px of that grid] (bilinear, scaled by the size ratio) on
+    shrunk images (:func:`shrunk`) brought to (H, W)."""
+    h, w = a.shape[:2]
+    if (h, w) == (H, W):
+        return a
+    if a.dtype == bool:
+        return cv2.resize(a.astype(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST).astype(bool)
+    return cv2.resize(a, (W, H), interpolation=cv2.INTER_LINEAR) * np.float32([W / w, H / h])

@@ -15,18 +15,18 @@ import logging
 from dataclasses import dataclass, field
 from typing import Optional
 
-import cv2
 import numpy as np
 
 from nerif.cache import cached_arrays, content_digest
 from nerif.registry import Registry
 from nerif.sensing.flame_light import without_flame_light
-from nerif.sensing.flow import estimate, texture_scale_px, texture_width
-from nerif.sensing.imaging import resample
+from nerif.sensing.flow import estimate
+from nerif.sensing.imaging import enlarged, resample, shrunk
 from nerif.sensing.noise import MIN_PIXELS, residual_noise
 from nerif.sensing.occlusion import local_contrast, occluded
 from nerif.sensing.saturation import TOP, saturated
 from nerif.sensing.shake import MIN_QUIET, rigid_shift
+from nerif.sensing.texture import shrink_factor, texture_scale_px, texture_width
 from nerif.sensing.vectors import median_test
 
 log = logging.getLogger(__name__)
@@ -111,47 +111,6 @@ def clipped_share(distorted: np.ndarray, reference: np.ndarray) -> float:
 def _either(a: Optional[np.ndarray], b: Optional[np.ndarray]) -> Optional[np.ndarray]:
     """Two optional masks' union (None where neither is given)."""
     return b if a is None else a if b is None else a | np.asarray(b, dtype=bool)
-
-
-TUNED_SCALE_PX = 1.45  # the texture's correlation length the flows' settings are tuned for (the shared captures')
-
-
-def shrink_factor(scale_px: float, setting) -> int:
-    """How many times smaller the images are made for the flow: ``setting``, or for ``auto`` the texture's
-    correlation length ``scale_px`` (:func:`~nerif.sensing.flow.texture_scale_px`) over :data:`TUNED_SCALE_PX`,
-    rounded down:
-    1 on the shared captures (1.45 px) and nerif's patterns (1.34-1.54 px), 2 on a 4x finer camera's images of the
-    same background (3.19 px: sigma error 0.089 with the flow alone, 0.153 on the images as they are), 5 at 10.5x
-    finer (7.34 px: 0.077, 0.080 with 3). On the Poisson-disk pattern enlarged k times (1.34, 2.07, 2.89, 3.76,
-    5.50, 9.45 px for k = 1, 2, 3, 4, 6, 10.5: factors 1, 1, 1, 2, 3, 6) about k / 2 measures best (k = 4: 0.0058 px
-    of error a pixel of the k = 1 grid with 2, 0.0097 with 3, 0.019 with 1; k = 3: 0.0081 with 1 and 0.0082 with 2;
-    k = 10.5: 0.0053, 0.0054, 0.0064 with 4, 5, 6, 0.014 with 3)."""
-    if setting == "auto":
-        return max(1, int(scale_px / TUNED_SCALE_PX))
-    if not (isinstance(setting, int) and setting >= 1):
-        raise ValueError(f"measure.flow_factor={setting!r}: a whole number (the images made that many times smaller "
-                         "for the flow; 1: as they are) or auto")
-    return setting
-
-
-def shrunk(image: np.ndarray, factor: int) -> np.ndarray:
-    """(H, W) -> (H // factor, W // factor) area means (the image itself for 1): a texture ``factor`` times finer in
-    pixels, the noise averaged down."""
-    if factor == 1:
-        return image
-    H, W = image.shape
-    return cv2.resize(np.float32(image), (max(W // factor, 1), max(H // factor, 1)), interpolation=cv2.INTER_AREA)
-
-
-def enlarged(a: np.ndarray, H: int, W: int) -> np.ndarray:
-    """A mask (h, w) bool (nearest) or a flow (h, w, 2) [px of that grid] (bilinear, scaled by the size ratio) on
-    shrunk images (:func:`shrunk`) brought to (H, W)."""
-    h, w = a.shape[:2]
-    if (h, w) == (H, W):
-        return a
-    if a.dtype == bool:
-        return cv2.resize(a.astype(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST).astype(bool)
-    return cv2.resize(a, (W, H), interpolation=cv2.INTER_LINEAR) * np.float32([W / w, H / h])
 
 
 @MEASUREMENT.register("default")

@@ -7,7 +7,7 @@ from typing import Optional
 import cv2
 import numpy as np
 
-from nerif.sensing.flow import texture_width
+from nerif.sensing.texture import texture_width
 
 
 def local_contrast(image: np.ndarray, width_px: float) -> np.ndarray:
@@ -21,7 +21,7 @@ def local_contrast(image: np.ndarray, width_px: float) -> np.ndarray:
 def occluded(reference: np.ndarray, fraction: float = 0.25, width_px: Optional[float] = None,
              contrast: Optional[np.ndarray] = None) -> np.ndarray:
     """(H, W) bool: the pixels where ``reference`` (H, W) shows no texture: its :func:`local_contrast` over the
-    texture's own scale (the flow's normalisation width, :func:`nerif.sensing.flow.texture_width`) below
+    texture's own scale (the flow's normalisation width, :func:`nerif.sensing.texture.texture_width`) below
     ``fraction`` of the background's contrast (the view's median, or half that of its best-textured tenth where
     most of the view is hidden), grown by 3 such widths (the contrast window and the flow's window
     reach that far across the occluder's edge). A speckle background keeps its contrast within a factor of two or so

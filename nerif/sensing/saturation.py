@@ -9,7 +9,7 @@ from typing import Optional
 import cv2
 import numpy as np
 
-from nerif.sensing.flow import texture_width
+from nerif.sensing.texture import texture_width
 
 TOP = 1.0  # the full scale of images read as [0, 1] of their bit depth
 
@@ -21,7 +21,7 @@ def _disc(radius: int) -> np.ndarray:
 def saturated(distorted: np.ndarray, reference: np.ndarray, margin_px: int = 1,
               width_px: Optional[float] = None) -> np.ndarray:
     """(H, W) bool: the areas at the top code value in either exposure (``distorted``, ``reference``: (H, W) in
-    [0, 1] of full scale) wider than two of the texture's widths (:func:`nerif.sensing.flow.texture_width`: a
+    [0, 1] of full scale) wider than two of the texture's widths (:func:`nerif.sensing.texture.texture_width`: a
     morphological opening takes off the clipped centres of the pattern's dots), dilated by ``margin_px`` (the flow's
     estimate at a pixel beside a clipped one reads it); ``width_px``: that width where the caller has it. Exactly the top: a sensor clips there; a rendered image's
     interpolation may overshoot it, which no sensor records."""
