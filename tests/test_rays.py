@@ -83,3 +83,18 @@ def test_rays_coarser_than_the_probe_grid_are_said_and_a_whole_float_is_a_binnin
     assert "(auto: 4)" in caplog.text
     with pytest.raises(ValueError, match="data.binning=4.5: auto or a whole number"):
         resolve_binning(4.5, cams, box, "the sensor")
+
+
+def test_the_pixels_outside_the_box_are_those_whose_ray_misses_it():
+    """A small box at the centre of a camera's view: its centre pixel sees it, the corners do not, and the count
+    of pixels outside is the sensor's less the rays that cross it."""
+    from nerif.geometry import ProbeBox, arc_rig, outside_the_box, rays_in_box
+
+    box = ProbeBox((8, 8, 8), 2.0)
+    cams = arc_rig(n_cameras=2, binning=40)
+    rays = rays_in_box(box, cams)
+    quiet = outside_the_box(cams, rays[2], rays[3])
+    for v, (cam, q) in enumerate(zip(cams, quiet)):
+        assert q.shape == (cam.height, cam.width)
+        assert not q[cam.height // 2, cam.width // 2] and q[0, 0] and q[-1, -1]
+        assert int((~q).sum()) == int(rays[3][v + 1] - rays[3][v])

@@ -25,9 +25,9 @@ from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region
 from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.rig_file import RigFile, read_rig
 from nerif.data.view_check import screened
-from nerif.data.scene import (DATASETS, Scene, ViewImages, found_per_view, heldout_views, outside_the_box,
+from nerif.data.scene import (DATASETS, Scene, ViewImages, found_per_view, heldout_views,
                               scene_from_displacements)
-from nerif.geometry import Camera, rays_in_box
+from nerif.geometry import Camera, outside_the_box, rays_in_box
 from nerif.physics import Ambient
 from nerif.sensing.flow import FLOW, check_flow
 from nerif.sensing.measurement import MEASUREMENT, measure_cached
@@ -187,7 +187,7 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
     flames = reference_images([(p,) for p in flame], rig.sensor_px, "flame")[0] if flame else [None] * len(images)
     hidden = occluder_masks(rig, lambda paths: reference_images([(p,) for p in paths], rig.sensor_px, "occluders")[0])
     check_flow(flow)  # settings that cannot measure say so once, not as an empty view each
-    quiet = outside_the_box(cameras, rays)
+    quiet = outside_the_box(cameras, rays[2], rays[3])
     measured, cached = zip(*[measure_cached(cache_dir, measure, images[v], refs[v], name=cam.name, flow=flow,
                                             flame=flames[v], hidden=hidden[v], grid_px=(cam.height, cam.width),
                                             region=roi, quiet=quiet[v])

@@ -336,18 +336,6 @@ def heldout_views(heldout, n_views: int, what: str = "the held-out views") -> li
     return held
 
 
-def outside_the_box(cameras: list[Camera], rays: tuple) -> list[np.ndarray]:
-    """Per view, (height, width) bool: the pixels whose ray misses the probe box (no flame deflects them), from
-    ``rays`` (:func:`nerif.geometry.rays_in_box`: origins, dirs, pixel, view_start)."""
-    pixel, starts = rays[2].cpu().numpy(), rays[3].cpu().numpy()
-    out = []
-    for v, cam in enumerate(cameras):
-        free = np.ones(cam.height * cam.width, bool)
-        free[pixel[starts[v]:starts[v + 1]]] = False
-        out.append(free.reshape(cam.height, cam.width))
-    return out
-
-
 def found_per_view(measurements: list) -> dict:
     """What each view's measurement found (their ``found``), as name -> list of one value per view."""
     return {k: [m.found[k] for m in measurements] for k in measurements[0].found} if measurements else {}

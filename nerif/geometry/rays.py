@@ -42,6 +42,18 @@ def rays_in_box(box: ProbeBox, cameras: list[Camera], device="cpu"):
     return origins, torch.cat(dirs), torch.cat(pixels), torch.tensor(starts, device=device)
 
 
+def outside_the_box(cameras: list[Camera], pixel: torch.Tensor, view_start: torch.Tensor) -> list[np.ndarray]:
+    """Per view, (height, width) bool: the pixels whose ray misses the probe box (no flame deflects them), from the
+    rays that cross it (:func:`rays_in_box`'s ``pixel`` (N,) and ``view_start`` (V + 1,))."""
+    pixel, starts = pixel.cpu().numpy(), view_start.cpu().numpy()
+    out = []
+    for v, cam in enumerate(cameras):
+        free = np.ones(cam.height * cam.width, bool)
+        free[pixel[starts[v]:starts[v + 1]]] = False
+        out.append(free.reshape(cam.height, cam.width))
+    return out
+
+
 def view_index(view_start: torch.Tensor) -> torch.Tensor:
     """(V + 1,) view offsets -> (N,) view of every ray."""
     return torch.repeat_interleave(torch.arange(len(view_start) - 1, device=view_start.device), view_start.diff())

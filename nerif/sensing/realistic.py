@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from nerif.cache import cached_arrays
-from nerif.geometry import Camera, ProbeBox
+from nerif.geometry import Camera, ProbeBox, outside_the_box
 from nerif.renderers.voxel import voxel_deflection
 from nerif.sensing.burner import DARK, burner_pixels
 from nerif.sensing.displacement import deflection_to_displacement, displacement_to_deflection
@@ -179,6 +179,7 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
     field_key = hashlib.sha256(delta.cpu().numpy().tobytes()).hexdigest()
     eps_obs = torch.empty(len(dirs), 3, dtype=torch.float32)
     rec = {"reference": [], "distorted": [], "u_true": [], "u_est": [], "circle_of_confusion_px": []}
+    quiet = outside_the_box(cameras, pixel, view_start)  # pixels whose ray misses the box
     sq_err, count = 0.0, 0
     for v, cam in enumerate(cameras):
         img_cam = cam.unbinned(rig_binning).binned(image_binning)
@@ -203,11 +204,9 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
             rec.setdefault("occluded_true", []).append(np.float64(blocks.mean()))
         sl = slice(int(view_start[v]), int(view_start[v + 1]))
         pix = pixel[sl].cpu().numpy()
-        quiet = np.ones(cam.height * cam.width, bool)
-        quiet[pix] = False  # pixels whose ray misses the box
         m = MEASUREMENT.build(measure, distorted=distorted, reference=reference, flow=flow,
                               grid_px=(cam.height, cam.width), image_binning=image_binning,
-                              quiet=quiet.reshape(cam.height, cam.width), name=cam.name)
+                              quiet=quiet[v], name=cam.name)
         for k, x in m.found.items():
             rec.setdefault(f"found/{k}", []).append(np.asarray(x, dtype=np.float64))
 
