@@ -7,6 +7,9 @@ os.environ.setdefault("TRITON_INTERPRET", "1")
 import pytest
 import torch
 
+if os.environ.get("PYTEST_XDIST_WORKER_COUNT"):  # pytest -n K: K processes share the cores, a thread each by default
+    torch.set_num_threads(max(1, (os.cpu_count() or 1) // int(os.environ["PYTEST_XDIST_WORKER_COUNT"])))
+
 
 def pytest_report_header(config):
     """One line at the top of the run where the project's shared captures are not beside the clone."""
