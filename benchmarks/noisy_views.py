@@ -24,6 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from ablation import write_report  # noqa: E402
 from same_figures import REPO, SHARED, output_folder, run  # noqa: E402
 
 CAPTURE = SHARED / "independent_capture_bunsen"
@@ -83,9 +84,7 @@ def main(argv=None) -> dict:
                  else f"exit {r['exit']}: {r['message']} |")
         lines.append(f"| {name} | {cells} |")
     text = "\n".join(lines) + "\n"
-    print(text)
-    (out / "noisy_views.json").write_text(json.dumps(rows, indent=1))
-    (out / "noisy_views.md").write_text(text)
+    write_report(out, "noisy_views", rows, text)  # atomically, and printed
     return rows
 
 

@@ -26,6 +26,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from images import finer_capture  # noqa: E402
+from ablation import write_report  # noqa: E402
 from same_figures import REPO, SHARED, output_folder, run  # noqa: E402
 
 FLAMES = {"bunsen": "independent_capture_bunsen", "lifted": "independent_capture_lifted"}
@@ -87,9 +88,7 @@ def main(argv=None) -> dict:
             out / "runs" / "independent_lifted_fine", ["data=capture", f"data.root={SHARED / FINE}", "data.binning=16",
                                                        f"data.truth={SHARED / FINE / 'volume.npz'}"], args.resume)
     text = report(rows)
-    print(text)
-    (out / "own_chain.json").write_text(json.dumps(rows, indent=1))
-    (out / "own_chain.md").write_text(text)
+    write_report(out, "own_chain", rows, text)  # atomically, and printed
     return rows
 
 
