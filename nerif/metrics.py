@@ -49,3 +49,41 @@ def select_by_heldout(runs: dict) -> object:
         raise ValueError("no run has held-out rays to choose by (hold out views: data.heldout_split or "
                          "data.heldout_views)")
     return min(scored, key=scored.get)
+
+
+def uncertainty_scores(sigma: np.ndarray, sigma_std: np.ndarray, sigma_true: np.ndarray,
+                       flame_share: float = 0.05, core_share: float = 0.05) -> dict:
+    """How well a per-voxel standard deviation ``sigma_std`` describes the error of ``sigma`` against
+    ``sigma_true`` (all (nx, ny, nz)), over the flame voxels (``|sigma_true|`` above ``flame_share`` of its peak):
+    ``coverage_1sigma``, ``coverage_2sigma`` (the share whose error lies within 1 and 2 standard deviations; a
+    Gaussian's are 0.683 and 0.954), ``coverage_2sigma_core`` (the same in the hot core: the ``core_share`` of the
+    flame voxels of largest ``|sigma_true|``), ``ause`` (the area between the sparsification curves of the RMS error
+    when the voxels are removed by ``sigma_std`` and by the error itself, over that of the error alone: 0 for a
+    perfect ranking), ``spearman`` (the rank correlation of ``sigma_std`` and ``|error|``). Empty without a flame."""
+    from scipy.stats import spearmanr
+
+    truth = np.abs(sigma_true)
+    flame = truth > flame_share * truth.max() if truth.max() > 0 else np.zeros_like(truth, bool)
+    if flame.sum() < 10:
+        return {}
+    err, std = np.abs(sigma - sigma_true)[flame], np.asarray(sigma_std)[flame]
+    core = truth[flame] >= np.quantile(truth[flame], 1.0 - core_share)
+    return {"coverage_1sigma": float((err <= std).mean()), "coverage_2sigma": float((err <= 2 * std).mean()),
+            "coverage_2sigma_core": float((err[core] <= 2 * std[core]).mean()),
+            "ause": ause(err, std), "spearman": float(spearmanr(std, err)[0])}
+
+
+def ause(err: np.ndarray, std: np.ndarray, steps: int = 50) -> float:
+    """The area under the sparsification error curve (:func:`uncertainty_scores`): RMS of ``err`` (M,) left after
+    removing the largest shares of the voxels by ``std`` (M,), less that after removing them by ``err`` itself (the
+    oracle), over shares 0 to 0.98, divided by the RMS of all of ``err``."""
+    order_std, order_err = np.argsort(-std, kind="stable"), np.argsort(-err, kind="stable")
+    sq = err.astype(np.float64) ** 2
+    shares = np.linspace(0.0, 0.98, steps)
+
+    def curve(order):
+        rest = np.cumsum(sq[order][::-1])[::-1]  # rest[i]: the sum of squares from rank i on
+        return np.array([np.sqrt(rest[int(f * len(sq))] / (len(sq) - int(f * len(sq)))) for f in shares])
+
+    gap = curve(order_std) - curve(order_err)
+    return float(((gap[1:] + gap[:-1]) / 2 * np.diff(shares)).sum() / np.sqrt(sq.mean())) if sq.mean() > 0 else 0.0

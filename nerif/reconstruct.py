@@ -19,7 +19,10 @@ from nerif.data.scene import hot_evidence, view_directions, view_span_deg
 from nerif.io.export import write_json
 from nerif.io.outputs import RESULTS, summary_line, volume_slices, write_masks, write_outputs, write_sensing
 from nerif.masks import MASKS
-from nerif.solvers import SOLVERS
+from nerif.sensing.measurement import CAUSES
+from nerif.solvers import SOLVERS, Interrupted
+from nerif.solvers.base import stop_signals
+from nerif.solvers.uncertainty import UNCERTAINTY
 
 log = logging.getLogger(__name__)
 _PACKAGE = Path(__file__).resolve().parent  # nerif's own code, whose Python warnings a run records
@@ -101,14 +104,16 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
     torch.manual_seed(cfg.seed)
     # every check that can fail happens here, before any training; the solver checks its settings before any data
     solver = SOLVERS.build(group(cfg, "solver"))
+    uncertainty = UNCERTAINTY.build(group(cfg, "uncertainty"))
     extra = {} if frame is None else {"frame": frame}
     scene = DATASETS.build(group(cfg, "data"), device=str(device), **extra)
     masks = MASKS.build(group(cfg, "mask"), scene=scene)
     solver.setup(scene, masks)  # checks a known truth against the prior first
+    uncertainty.check(solver)
     rig_warnings = check_sign(scene, cfg.field.prior) + ill_posed(scene)
     tc = cfg.train
     write_masks(masks, scene, out_dir)
-    write_sensing(scene, out_dir)
+    write_sensing(scene, out_dir, CAUSES)
     checkpoint = out_dir / "checkpoint.pt"
     resume = checkpoint_to_resume(tc.resume, checkpoint)
     if resume is not None:
@@ -144,7 +149,16 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
     try:
         solver.fit(checkpoint_every=tc.checkpoint_every, checkpoint_every_s=tc.checkpoint_every_s,
                    checkpoint=checkpoint, on_eval=on_eval, on_step=on_step, progress=tc.progress,
-                   resume_hint=resume_hint, threads=threads)
+                   resume_hint=resume_hint, threads=threads, checkpoint_at_end=False)
+        with stop_signals() as received:  # a signal ends the uncertainty, not the results
+            estimated = uncertainty(solver, stop=lambda: bool(received))
+        if received:
+            log.warning("%s while estimating the uncertainty: the results are written without it", received[0])
+        solver.added.update(estimated.get("volumes", {}))
+        solver.report.update(estimated.get("report", {}))
+        if "sigma_std" in solver.added:
+            writer.add_figure("uncertainty", volume_slices(solver.reconstruction(), scene, "uncertainty",
+                                                           solver.added["sigma_std"]), solver.iteration)
     finally:
         writer.close()
 
@@ -164,12 +178,16 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
         metrics.update(about)
         write_json(metrics, out_dir / "metrics.json")
     except OSError as e:  # a full disk: one sentence saying what is there and what is not
+        solver.checkpoint(checkpoint)  # the final state where it still fits, for a resumed run to write them from
         saved = sorted(p.name for p in out_dir.iterdir() if not p.name.startswith("."))
         missing = [f for f in RESULTS if f not in saved]
         raise ValueError(f"writing the results to {out_dir} failed ({e.strerror or e}); it holds "
                          f"{', '.join(saved) or 'nothing'}, not {', '.join(missing)}: free some space and write "
                          "them again with train.resume=auto") from None
+    solver.checkpoint(checkpoint)  # after the results: on a nearly full disk, they take the room first
     print(summary_line(metrics, out_dir), flush=True)
+    if received:
+        raise Interrupted(received[0])
     return metrics
 
 

@@ -444,6 +444,25 @@ def test_a_full_disk_loses_no_result_that_fits_and_is_one_sentence(tmp_path, mon
         run(tiny_config("train.iterations=4"), tmp_path / "b")
 
 
+def test_the_results_are_written_before_the_final_checkpoint(tmp_path, monkeypatch):
+    """Issue 47: on a nearly full disk the results take the room first; the checkpoint of the final state follows
+    them (a resumed run finds it)."""
+    from nerif.app import run
+    from nerif.solvers.base import IterativeSolver
+    from tests.helpers import tiny_config
+
+    saves, save = [], IterativeSolver.save
+
+    def recorded(self, path):
+        saves.append((self.iteration, (tmp_path / "metrics.json").is_file()))
+        save(self, path)
+
+    monkeypatch.setattr(IterativeSolver, "save", recorded)
+    run(tiny_config("train.iterations=4", "train.checkpoint_every=2"), tmp_path)
+    assert saves == [(2, False), (4, True)]
+    assert torch.load(tmp_path / "checkpoint.pt", weights_only=False)["iteration"] == 4
+
+
 def test_a_full_disk_is_named_by_its_free_space_whatever_torch_says(tmp_path, monkeypatch):
     """Issue 47: torch reports a full disk in more than one sentence ("unexpected pos" did not name the disk); the
     free space read from the file system decides. A failed write on a disk with room stays a write error."""

@@ -113,8 +113,8 @@ def test_views_weighed_by_their_noise_reconstruct_better_than_alike():
     level[list(noisy_views)] = 4.0
     noise = torch.randn(sc.eps.shape, generator=torch.Generator().manual_seed(0), dtype=sc.eps.dtype)
     rms = float(sc.eps.norm(dim=-1).pow(2).mean().sqrt())
-    sc = replace(sc, eps=sc.eps + 0.1 * rms * level[sc.ray_views()][:, None] * noise,
-                 measured={"noise": [0.01 * float(x) for x in level]})
+    sc = replace(sc, eps=sc.eps + 0.1 * rms * level[sc.ray_views()][:, None] * noise).with_found(
+        noise=[0.01 * float(x) for x in level])
 
     def error(weighted):
         s = cgls(sc, "data_term=flow", f"data_term.noise_weighted={weighted}", "solver.iterations=30",

@@ -202,14 +202,13 @@ def test_a_noisier_view_counts_less_in_both_terms(realistic):
     """Each view's weight is ``1 / sigma_v^2`` over its mean (its measured noise, ``noise``): with one view's noise
     read twice the others', it counts a quarter of theirs, in the flow term and in the image term alike; the image
     term's weights keep their sum (its size beside the flow term); with ``noise_weighted=false`` all count alike."""
-    import dataclasses
 
     from nerif.solvers.data_terms import noise_weights, view_scales
 
     _, scene = realistic
     noise = [0.01] * scene.n_views
     noise[1] = 0.02
-    noisy = dataclasses.replace(scene, measured={**scene.measured, "noise": noise})
+    noisy = scene.with_found(noise=noise)
     w = noise_weights(noisy)
     assert float(w[1] / w[0]) == pytest.approx(0.25) and float(w.mean()) == pytest.approx(1.0)
     term = image_term(noisy, flow_weight=1.0)

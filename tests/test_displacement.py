@@ -28,7 +28,7 @@ def test_deflection_displacement_round_trip_is_exact(view):
 def test_a_scenes_displacements_are_in_sensor_pixels_whatever_the_binning():
     """``Scene.to_displacement``: the full sensor's pixels for rays of binned cameras, as the full-sensor camera
     maps them, and back to the deflections by ``displacement_to_deflection``."""
-    from nerif.data.scene import Scene
+    from nerif.data.scene import Scene, views_of
     from nerif.geometry import ProbeBox, rays_in_box
     from nerif.physics import Ambient
 
@@ -38,7 +38,8 @@ def test_a_scenes_displacements_are_in_sensor_pixels_whatever_the_binning():
     g = torch.Generator().manual_seed(3)
     eps = torch.randn(len(d), 3, dtype=torch.float64, generator=g) * 1e-4
     eps = eps - (eps * d.double()).sum(-1, keepdim=True) * d.double()
-    scene = Scene(box, Ambient(293.0, 1.000277, 2000.0), binned, origins, d, eps.float(), pixel, starts)
+    scene = Scene(box=box, ambient=Ambient(293.0, 1.000277, 2000.0), views=views_of(binned), origins=origins, dirs=d,
+                  eps=eps.float(), pixel=pixel, view_start=starts)
     u = scene.to_displacement(eps)
     full = arc_rig(n_cameras=2, binning=1)
     for v in range(2):

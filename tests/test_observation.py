@@ -1,5 +1,4 @@
 """Each view's observation model on the image grid: units converted in one place, the shake, the blocks of pixels."""
-import dataclasses
 
 import pytest
 import torch
@@ -44,8 +43,7 @@ def test_a_fields_deflections_become_the_displacements_the_images_hold(scene):
 def test_units_and_the_shake_convert_in_one_place(scene):
     """Full-sensor and image pixels differ by the images' binning both ways; the shake the measurement took off
     (full-sensor px) is held in image px; the gain per unit of sigma is the scene's per radian times its scale."""
-    shaken = dataclasses.replace(scene, measured={**scene.measured,
-                                                  "shake_px": [[0.8 * v, -0.4] for v in range(scene.n_views)]})
+    shaken = scene.with_found(shake_px=[[0.8 * v, -0.4] for v in range(scene.n_views)])
     for view in observations(shaken):
         binning = shaken.images[view.view].camera.binning
         assert binning == 4 and view.block == shaken.image_block()

@@ -115,9 +115,13 @@ def test_an_opaque_burner_is_dark_in_both_exposures_found_occluded_and_left_unkn
 
 def test_light_brighter_than_full_scale_clips_and_the_stage_counts_it():
     """The flame's light (its blur is tested in ``test_emission.py``) brighter than the sensor's full scale
-    saturates the distorted image, and the measurement stage counts those pixels."""
-    bright = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], luminosity=20.0)))  # clips an area
-    assert (bright.sensing["distorted"] == 255).any() and (bright.sensing["found/saturated"] > 0).all()
+    clips the distorted image. Where the pattern's dark dots still show through, the texture is there: counted as
+    clipped, not left out (issue 49); where the light clips them too, the stage leaves those pixels out."""
+    bright = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], luminosity=20.0)))
+    assert (bright.sensing["distorted"] == 255).any() and (bright.sensing["found/clipped"] > 0.04).all()
+    assert (bright.sensing["found/saturated"] < 0.5 * bright.sensing["found/clipped"]).all()
+    blinding = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], luminosity=200.0)))
+    assert (blinding.sensing["found/saturated"] > 0.05).all()
 
 
 def test_pixels_that_integrate_the_background_measure_as_well_and_a_bad_count_is_refused():

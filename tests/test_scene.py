@@ -57,7 +57,7 @@ def test_flow_failures_are_left_out_and_said_never_propagated(monkeypatch, caplo
     monkeypatch.setitem(FLOW._entries, "half_nan", half_nan)
     with caplog.at_level("INFO"):
         s = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], flow={"name": "half_nan"})))
-    assert "displacement estimates are left out" in caplog.text and "50.0 % unmeasured" in caplog.text
+    assert caplog.text.count("50.0 % unmeasured") >= 2  # each view says it, as a capture's do
     assert torch.isfinite(s.eps).all() and 0 < len(s.eps) < 2 * 18 * 32
     assert int(s.view_start[-1]) == len(s.dirs) == len(s.pixel)
     rows = s.pixel // 18

@@ -205,7 +205,9 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
                  ", ".join("-" if n is None else f"{100 * n:.2f} %" for n in noise))
     views = [ViewImages(torch.as_tensor(r, device=device), torch.as_tensor(m.distorted, device=device), cam)
              for r, m, cam in zip(refs, measured, full)]
+    causes = [m.left_out for m in measured]
     scene = scene_from_displacements(rig.box, rig.ambient, cameras, [m.displacement for m in measured],
                                      [m.valid for m in measured], device=device, rays=rays, sigma_prior=prior,
-                                     images=views, truth_T=truth_T, measured=found_per_view(measured))
+                                     images=views, truth_T=truth_T, found=found_per_view(measured),
+                                     left_out=causes if all(c is not None for c in causes) else None)
     return screened(scene, held)

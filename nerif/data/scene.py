@@ -39,14 +39,65 @@ class ViewImages:
         return replace(self, reference=self.reference.to(device), distorted=self.distorted.to(device))
 
 
-@dataclass
+@dataclass(frozen=True)
+class View:
+    """One camera's record in a scene: everything that is per view besides its rays, so that selecting views
+    carries all of it.
+
+    Attributes:
+        camera: the camera on the ray grid.
+        images: its reference and distorted background images, where the data have them (captures, realistic
+            sensing), else None.
+        valid: (height, width) bool on the ray grid: the pixels with a usable measurement, where the data lack some
+            (a region of interest, a flow without an estimate), else None (every pixel). Any other pixel is
+            unknown: it has no ray, carves no visual hull and counts as no ambient.
+        mask: (height, width) bool 2-D mask that came with the data (the mask builders then use it instead of
+            thresholding the deflections), else None.
+        found: what the measurement stage found in this view (:class:`nerif.sensing.measurement.ViewMeasurement`
+            ``found``: name -> value), empty where the data were not measured from images.
+        measured_px: (height, width, 2) the stage's displacements on the whole ray grid [px of the full sensor],
+            NaN where left out, and ``left_out`` (height, width) uint8 why each pixel was (an index into
+            :data:`nerif.sensing.measurement.CAUSES`, 0: kept): for the view's picture; None where not measured.
+    """
+
+    camera: Camera
+    images: Optional[ViewImages] = None
+    valid: Optional[np.ndarray] = None
+    mask: Optional[np.ndarray] = None
+    found: dict = field(default_factory=dict)
+    measured_px: Optional[np.ndarray] = None
+    left_out: Optional[np.ndarray] = None
+
+    def to(self, device) -> "View":
+        return replace(self, images=self.images.to(device)) if self.images is not None else self
+
+
+def views_of(cameras: list[Camera], images: Optional[list] = None, valid: Optional[list] = None,
+             masks: Optional[list] = None, found: Optional[dict] = None, measured_px: Optional[list] = None,
+             left_out: Optional[list] = None) -> list[View]:
+    """Per-view records from per-view lists (each None, or one entry per camera; ``found``: name -> list of one
+    value per view)."""
+    n = len(cameras)
+    for what, per_view in (("images", images), ("valid", valid), ("masks", masks), ("measured_px", measured_px),
+                           ("left_out", left_out), *(found or {}).items()):
+        if per_view is not None and len(per_view) != n:
+            raise ValueError(f"{what}: {len(per_view)} entries for {n} views")
+
+    def at(per_view, v):
+        return per_view[v] if per_view is not None else None
+
+    return [View(cam, at(images, v), at(valid, v), at(masks, v), {k: x[v] for k, x in (found or {}).items()},
+                 at(measured_px, v), at(left_out, v)) for v, cam in enumerate(cameras)]
+
+
+@dataclass(kw_only=True)
 class Scene:
     """Rays and observations of a BOS experiment.
 
     Attributes:
         box: the probe box (reconstruction grid).
         ambient: T0, n0 and the normalisation scale delta_thre.
-        cameras: the V cameras.
+        views: the V per-view records (:class:`View`: camera, images, valid pixels, mask, what was measured).
         origins: (V, 3) camera centres [mm].
         dirs: (N, 3) unit directions of every ray that crosses the box, grouped by view.
         eps: (N, 3) observed world-frame deflections [rad].
@@ -56,28 +107,22 @@ class Scene:
         perpendicular_only: the observations are only the part of each deflection perpendicular to its ray, as
             measured through image displacements (their along-ray component is zero and means nothing); solvers
             then compare only that part. False for ideal sensing (full vectors).
-        sensing: what realistic sensing produced (images, true and estimated displacements; see
-            :func:`nerif.sensing.realistic.realistic`), else None.
-        mask_images: per view, (height, width) bool 2-D masks that came with the data (the mask builders then
-            use them instead of thresholding the deflections), else None.
+        sensing: what realistic sensing produced for figures and scores (images, true and estimated
+            displacements; see :func:`nerif.sensing.realistic.realistic`), else None.
         heldout: the views kept out of training, as a scene of their own (same box and ambient), else None.
         sigma_prior: (a, b) interval of sigma the data say the field lies in, else None (the field's default).
-        images: per view, the reference and distorted background images (:class:`ViewImages`) where the data
-            have them (captures, realistic sensing), else None.
         displacements: (N, 2) the image displacements measured for each ray [px of the full sensor] where the data
-            were measured as displacements (captures), else None (:attr:`displacement_px` derives them).
-        measured: what the measurement stage found, per view (:class:`nerif.sensing.measurement.ViewMeasurement`
-            ``found``: name -> list of one value per view), where the data were measured from images, else None.
-        valid_images: per view, (height, width) bool on the ray grid: the pixels with a usable measurement, where
-            the data lack some (a region of interest, a flow without an estimate), else None (every pixel). Any
-            other pixel is unknown: it has no ray, carves no visual hull and counts as no ambient.
+            were measured as displacements (captures, realistic sensing), else None (:attr:`displacement_px`
+            derives them).
         observed: (N, 3) the observations in the unit the solvers fit, deflections of sigma: ``eps / scale``
             (derived, computed once).
+    The per-view lists (``cameras``, ``images``, ``valid_images``, ``mask_images``, ``measured``) are read from
+    ``views``.
     """
 
     box: ProbeBox
     ambient: Ambient
-    cameras: list[Camera]
+    views: list[View]
     origins: torch.Tensor
     dirs: torch.Tensor
     eps: torch.Tensor
@@ -86,17 +131,47 @@ class Scene:
     truth_T: Optional[np.ndarray] = None
     sensing: Optional[dict] = None
     perpendicular_only: bool = False
-    mask_images: Optional[list] = None
     heldout: Optional["Scene"] = None
     sigma_prior: Optional[tuple] = None
-    images: Optional[list] = None
     displacements: Optional[torch.Tensor] = None
-    valid_images: Optional[list] = None
-    measured: Optional[dict] = None
     observed: torch.Tensor = field(init=False, repr=False)
 
     def __post_init__(self):
         self.observed = self.eps / self.scale
+
+    @property
+    def cameras(self) -> list[Camera]:
+        return [v.camera for v in self.views]
+
+    def _every(self, name: str) -> Optional[list]:
+        """Each view's ``name``, or None where the views have none."""
+        per_view = [getattr(v, name) for v in self.views]
+        return per_view if any(x is not None for x in per_view) else None
+
+    @property
+    def images(self) -> Optional[list[ViewImages]]:
+        return self._every("images")
+
+    @property
+    def valid_images(self) -> Optional[list[np.ndarray]]:
+        return self._every("valid")
+
+    @property
+    def mask_images(self) -> Optional[list[np.ndarray]]:
+        return self._every("mask")
+
+    @property
+    def measured(self) -> Optional[dict]:
+        """What the measurement stage found, as name -> list of one value per view; None where nothing was."""
+        return found_per_view(self.views) if self.views and self.views[0].found else None
+
+    def with_found(self, **per_view) -> "Scene":
+        """The same scene with these measurement findings (name -> list of one value per view) set in its views."""
+        for k, x in per_view.items():
+            if len(x) != self.n_views:
+                raise ValueError(f"{k}: {len(x)} values for {self.n_views} views")
+        return replace(self, views=[replace(view, found={**view.found, **{k: x[v] for k, x in per_view.items()}})
+                                    for v, view in enumerate(self.views)])
 
     @property
     def scale(self) -> float:
@@ -171,13 +246,8 @@ class Scene:
         idx = torch.cat([torch.arange(int(self.view_start[v]), int(self.view_start[v + 1]), device=dev) for v in vs])
         counts = torch.tensor([int(self.view_start[v + 1] - self.view_start[v]) for v in vs], device=dev)
         starts = torch.cat([counts.new_zeros(1), counts.cumsum(0)])
-        def pick(per_view):
-            return [per_view[v] for v in vs] if per_view is not None else None
-
-        return replace(self, cameras=[self.cameras[v] for v in vs], origins=self.origins[vs], dirs=self.dirs[idx],
-                       eps=self.eps[idx], pixel=self.pixel[idx], view_start=starts, mask_images=pick(self.mask_images),
-                       heldout=None, sensing=None, images=pick(self.images), valid_images=pick(self.valid_images),
-                       measured={k: pick(v) for k, v in self.measured.items()} if self.measured else None,
+        return replace(self, views=[self.views[v] for v in vs], origins=self.origins[vs], dirs=self.dirs[idx],
+                       eps=self.eps[idx], pixel=self.pixel[idx], view_start=starts, heldout=None, sensing=None,
                        displacements=self.displacements[idx] if self.displacements is not None else None)
 
     def split_views(self, heldout) -> "Scene":
@@ -202,7 +272,7 @@ class Scene:
                        pixel=self.pixel.to(device), view_start=self.view_start.to(device),
                        displacements=self.displacements.to(device) if self.displacements is not None else None,
                        heldout=self.heldout.to(device) if self.heldout is not None else None,
-                       images=[im.to(device) for im in self.images] if self.images is not None else None)
+                       views=[v.to(device) for v in self.views])
 
 
 def _gathered(rays: tuple, images: list[np.ndarray], valid: list[np.ndarray], cameras: list[Camera],
@@ -235,7 +305,8 @@ def _gathered(rays: tuple, images: list[np.ndarray], valid: list[np.ndarray], ca
 
 
 def scene_from_images(box: ProbeBox, ambient: Ambient, cameras: list[Camera], eps_images: list[np.ndarray],
-                      valid: list[np.ndarray], device="cpu", rays: Optional[tuple] = None, **fields) -> Scene:
+                      valid: list[np.ndarray], device="cpu", rays: Optional[tuple] = None,
+                      masks: Optional[list[np.ndarray]] = None, **fields) -> Scene:
     """A scene of measured deflections: per view, the image pixels that are ``valid`` and whose ray crosses the box.
 
     Args:
@@ -244,19 +315,23 @@ def scene_from_images(box: ProbeBox, ambient: Ambient, cameras: list[Camera], ep
         valid: per view, (height, width) bool: the region of interest and finite data.
         rays: :func:`nerif.geometry.rays_in_box` of ``box`` and ``cameras`` on ``device``, where the caller has
             them already (else computed here).
-        fields: further :class:`Scene` fields (``mask_images``, ``heldout``, ``sensing``).
+        masks: per view, (height, width) bool 2-D masks that came with the data, else None.
+        fields: further :class:`Scene` fields (``heldout``, ``sensing``, ``truth_T``, ``sigma_prior``).
     Raises a clear error for a view with no valid pixel on the box.
     """
     rays = rays_in_box(box, cameras, device) if rays is None else rays
     origins, dirs, eps, pixel, view_start = _gathered(rays, eps_images, valid, cameras, box)
     eps = eps.float()
     known = [np.asarray(ok, dtype=bool) & np.isfinite(e).all(-1) for ok, e in zip(valid, eps_images)]
-    return Scene(box, ambient, cameras, origins, dirs, perpendicular(eps, dirs), pixel, view_start,
-                 perpendicular_only=True, valid_images=known, **fields)
+    return Scene(box=box, ambient=ambient, views=views_of(cameras, valid=known, masks=masks), origins=origins,
+                 dirs=dirs, eps=perpendicular(eps, dirs), pixel=pixel, view_start=view_start, perpendicular_only=True,
+                 **fields)
 
 
 def scene_from_displacements(box: ProbeBox, ambient: Ambient, cameras: list[Camera], displacements: list[np.ndarray],
-                             valid: list[np.ndarray], device="cpu", rays: Optional[tuple] = None, **fields) -> Scene:
+                             valid: list[np.ndarray], device="cpu", rays: Optional[tuple] = None,
+                             images: Optional[list[ViewImages]] = None, found: Optional[dict] = None,
+                             left_out: Optional[list[np.ndarray]] = None, **fields) -> Scene:
     """A scene of measured image displacements (:class:`nerif.sensing.measurement.ViewMeasurement`): per view, the
     pixels that are ``valid`` and whose ray crosses the box, each ray's displacement kept (``Scene.displacements``)
     and turned into its deflection once.
@@ -264,6 +339,9 @@ def scene_from_displacements(box: ProbeBox, ambient: Ambient, cameras: list[Came
     Args:
         displacements: per view, (height, width, 2) displacements [px of the full sensor] on the ray grid.
         valid: per view, (height, width) bool: the pixels with a usable measurement.
+        images: per view, the background images the displacements were measured from (None: not kept).
+        found: what the measurement stage found, name -> list of one value per view (:func:`found_per_view`).
+        left_out: per view, (height, width) uint8 why each pixel was left out (:class:`View`), or None.
         rays, fields: as for :func:`scene_from_images`.
     """
     rays = rays_in_box(box, cameras, device) if rays is None else rays
@@ -271,8 +349,10 @@ def scene_from_displacements(box: ProbeBox, ambient: Ambient, cameras: list[Came
     eps = torch.cat([displacement_to_deflection(u[view_start[v]:view_start[v + 1]],
                                                 dirs[view_start[v]:view_start[v + 1]].double(),
                                                 cam.unbinned(cam.binning)) for v, cam in enumerate(cameras)])
-    return Scene(box, ambient, cameras, origins, dirs, eps.float(), pixel, view_start, perpendicular_only=True,
-                 displacements=u.float(), valid_images=[np.asarray(ok, dtype=bool) for ok in valid], **fields)
+    views = views_of(cameras, images, [np.asarray(ok, dtype=bool) for ok in valid], found=found,
+                     measured_px=list(displacements) if left_out is not None else None, left_out=left_out)
+    return Scene(box=box, ambient=ambient, views=views, origins=origins, dirs=dirs, eps=eps.float(), pixel=pixel,
+                 view_start=view_start, perpendicular_only=True, displacements=u.float(), **fields)
 
 
 def hot_evidence(scene: Scene, per_view: bool = False):
@@ -337,7 +417,8 @@ def heldout_views(heldout, n_views: int, what: str = "the held-out views") -> li
 
 
 def found_per_view(measurements: list) -> dict:
-    """What each view's measurement found (their ``found``), as name -> list of one value per view."""
+    """What each view's measurement found (their ``found``: measurements or :class:`View` records), as name -> list
+    of one value per view."""
     return {k: [m.found[k] for m in measurements] for k in measurements[0].found} if measurements else {}
 
 

@@ -3,6 +3,7 @@ through a sensing model (ideal, perpendicular or realistic) and cached; and the 
 in time."""
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Optional
 
 import torch
@@ -11,12 +12,13 @@ from nerif.cache import cached_arrays, content_digest
 from nerif.data.folders import finite_or_masked
 from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.phantoms import PHANTOMS
-from nerif.data.scene import DATASETS, Scene, ViewImages, keep_rays, kept_pixels
+from nerif.data.scene import (DATASETS, Scene, ViewImages, keep_rays, kept_pixels, scene_from_displacements,
+                              views_of)
 from nerif.geometry import RIGS, rays_in_box
 from nerif.physics import Ambient
 from nerif.sensing.models import SENSING
 
-_SCENE_CACHE_VERSION = 5
+_SCENE_CACHE_VERSION = 6
 
 
 def supersampled(phantom: dict, factor: int):
@@ -83,31 +85,42 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
         eps, record = SENSING.build({"name": sensing, **sensor}, delta=delta, box=fine.box, cameras=cameras, dirs=dirs,
                                     pixel=pixel, view_start=view_start, step_mm=render_step_mm,
                                     rig_binning=cameras[0].binning, cache_dir=cache_dir)
-        return {"eps": eps.cpu().numpy(), **{f"sensing/{k}": v for k, v in (record or {}).items()}}
+        rendered = {"eps": eps.cpu().numpy()} if eps is not None else {}
+        return {**rendered, **{f"sensing/{k}": v for k, v in (record or {}).items()}}
 
     payload = {"v": _SCENE_CACHE_VERSION, "truth": content_digest(ph.T), "phantom": phantom, "rig": rig, "step": render_step_mm,
                "supersample": render_supersample, "sensing": sensing, "sensor": sensor}
     arrays = cached_arrays(cache_dir, "synthetic", payload, observe)
-    eps = torch.as_tensor(arrays["eps"], device=device)
     record = {k[len("sensing/"):]: v for k, v in arrays.items() if k.startswith("sensing/")} or None
-    keep = torch.as_tensor(finite_or_masked(eps.cpu().numpy(), f"{sensing} sensing"), device=device)
-    valid = None
-    if not keep.all():  # a pixel the flow gave no estimate for is unknown
-        valid = kept_pixels(cameras, pixel, view_start, keep)
-        dirs, eps, pixel, view_start = keep_rays(dirs, eps, pixel, view_start, keep)
-    measured_only = sensing != "ideal"  # every sensing but ideal goes through image displacements
+    if "eps" not in arrays:  # measured from images: built as a capture is, from each view's displacements
+        scene = measured_scene(ph, ambient, cameras, (origins, dirs, pixel, view_start), record, sensor, device)
+    else:
+        eps = torch.as_tensor(arrays["eps"], device=device)
+        keep = torch.as_tensor(finite_or_masked(eps.cpu().numpy(), f"{sensing} sensing"), device=device)
+        views = views_of(cameras)
+        if not keep.all():  # a ray the sensing could not render is unknown
+            views = views_of(cameras, valid=kept_pixels(cameras, pixel, view_start, keep))
+            dirs, eps, pixel, view_start = keep_rays(dirs, eps, pixel, view_start, keep)
+        scene = Scene(box=ph.box, ambient=ambient, views=views, origins=origins, dirs=dirs, eps=eps, pixel=pixel,
+                      view_start=view_start, truth_T=ph.T, sensing=record, perpendicular_only=sensing != "ideal")
     if deflection_noise > 0:  # each frame of a series has noise of its own, as each exposure does
         seed = noise_seed if frame is None else noise_seed + 7919 * (int(frame) + 1)
-        eps = with_noise(eps, dirs if measured_only else None, deflection_noise, seed)
-    images = None
-    if record is not None and "reference" in record:  # the images the cameras took, on the sensing's image grid
-        binning = int(sensor.get("image_binning", 1))
-        images = [ViewImages(torch.as_tensor(record["reference"][v] / 255.0, dtype=torch.float32, device=device),
-                             torch.as_tensor(record["distorted"][v] / 255.0, dtype=torch.float32, device=device),
-                             cam.unbinned(cam.binning).binned(binning)) for v, cam in enumerate(cameras)]
-    found = {k[len("found/"):]: v.tolist() for k, v in (record or {}).items() if k.startswith("found/")} or None
-    return Scene(ph.box, ambient, cameras, origins, dirs, eps.to(device), pixel, view_start, ph.T, record,
-                 perpendicular_only=measured_only, images=images, valid_images=valid, measured=found)
+        eps = with_noise(scene.eps, scene.dirs if scene.perpendicular_only else None, deflection_noise, seed)
+        scene = replace(scene, eps=eps, displacements=None)  # the displacements follow the noisy deflections
+    return scene
+
+
+def measured_scene(ph, ambient: Ambient, cameras: list, rays: tuple, record: dict, sensor: dict, device) -> Scene:
+    """The scene of a realistic chain's ``record``: each view's measured displacements, valid pixels, images and
+    findings, through :func:`nerif.data.scene.scene_from_displacements` (as a capture's)."""
+    binning = int(sensor.get("image_binning", 1))
+    images = [ViewImages(torch.as_tensor(record["reference"][v] / 255.0, dtype=torch.float32, device=device),
+                         torch.as_tensor(record["distorted"][v] / 255.0, dtype=torch.float32, device=device),
+                         cam.unbinned(cam.binning).binned(binning)) for v, cam in enumerate(cameras)]
+    found = {k[len("found/"):]: v.tolist() for k, v in record.items() if k.startswith("found/")}
+    return scene_from_displacements(ph.box, ambient, cameras, list(record["displacement_px"]), list(record["valid"]),
+                                    device=device, rays=rays, images=images, found=found, truth_T=ph.T, sensing=record,
+                                    left_out=list(record["left_out"]) if "left_out" in record else None)
 
 
 def with_noise(eps: torch.Tensor, dirs: Optional[torch.Tensor], fraction: float, seed: int) -> torch.Tensor:

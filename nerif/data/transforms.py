@@ -119,7 +119,7 @@ def load_views(root: Path, split: str, box: ProbeBox, ambient: Ambient, optics: 
         eps_images.append(resample(eps * ambient.delta_thre, cam.height, cam.width))  # block means
         valid.append(blocks_inside(roi, cam.height, cam.width))
         masks.append(resample(mask.astype(np.float32), cam.height, cam.width) > 0)
-    return scene_from_images(box, ambient, cameras, eps_images, valid, device=device, mask_images=masks, **fields)
+    return scene_from_images(box, ambient, cameras, eps_images, valid, device=device, masks=masks, **fields)
 
 
 def optics(pitch_um: float = 20.0, focal_mm: float = 105.0, f_number: float = 32.0,

@@ -15,7 +15,9 @@ import numpy as np
 import torch
 
 from nerif.io.export import write_npz, write_png, write_vti
-from nerif.io.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
+from nerif.metrics import uncertainty_scores
+from nerif.io.plots import (curves_figure, heldout_figure, measured_figure, save_figure, sensing_figure,
+                             slice_figure)
 
 log = logging.getLogger(__name__)
 # the files every run writes (held-out figures, masks and sensing pictures beside them where there are any)
@@ -32,9 +34,21 @@ def write_masks(masks, scene, out_dir: Path) -> None:
         write_vti(out_dir / "mask3d.vti", scene.box.voxel_mm, origin, mask=masks.volume.astype(np.float32))
 
 
-def write_sensing(scene, out_dir: Path) -> None:
-    """Realistic sensing, per view: the reference and distorted images (8-bit PNG, as a camera would save
-    them) and a figure of images and displacements."""
+def write_sensing(scene, out_dir: Path, causes: tuple = ()) -> None:
+    """Each measured view, training and held out: ``sensing/cameraNN_measured.png``, its reference with what the
+    measurement stage left out coloured by cause (``causes``: the names of the stage's codes,
+    :data:`nerif.sensing.measurement.CAUSES`) and its displacement magnitude. Realistic sensing, per view: the
+    reference and distorted images (8-bit PNG, as a camera would save them) and a figure of images and
+    displacements."""
+    for s in (scene, scene.heldout):
+        for view in (s.views if s is not None and causes else ()):
+            if view.left_out is None or view.images is None:
+                continue
+            kept = 100 * float(np.mean(view.left_out == 0))
+            save_figure(measured_figure(view.images.reference.cpu().numpy(), view.measured_px, view.left_out, causes,
+                                        f"{view.camera.name}: the measurement kept {kept:.1f} % of its rays "
+                                        "(displacements in px of the full sensor)"),
+                        out_dir / "sensing" / f"{camera_file(view.camera.name)}_measured.png")
     rec = scene.sensing
     if rec is None:
         return
@@ -46,11 +60,37 @@ def write_sensing(scene, out_dir: Path) -> None:
                     out_dir / "sensing" / f"view{v:02d}.png")
 
 
-def volume_slices(sigma: np.ndarray, scene, title: str):
-    """Slices of the temperature (with the truth where known), or of sigma when no temperature can be inferred."""
+def volume_slices(sigma: np.ndarray, scene, title: str, sigma_std: Optional[np.ndarray] = None):
+    """Slices of the temperature (with the truth where known), or of sigma when no temperature can be inferred;
+    with their standard deviation where estimated (``sigma_std``)."""
     if not scene.ambient.temperature_known:
-        return slice_figure(sigma, scene.box, None, title, unit="sigma", hot=-1)
-    return slice_figure(scene.ambient.temperature_from_sigma(sigma), scene.box, scene.truth_T, title)
+        return slice_figure(sigma, scene.box, None, title, unit="sigma", hot=-1, std=sigma_std)
+    std = temperature_std(scene.ambient, sigma, sigma_std) if sigma_std is not None else None
+    return slice_figure(scene.ambient.temperature_from_sigma(sigma), scene.box, scene.truth_T, title, std=std)
+
+
+def temperature_std(ambient, sigma: np.ndarray, sigma_std: np.ndarray) -> np.ndarray:
+    """The standard deviation of T [K] of one of sigma, to first order: ``|dT/dsigma| sigma_std``."""
+    h = 1e-4
+    slope = (ambient.temperature_from_sigma(sigma + h) - ambient.temperature_from_sigma(sigma - h)) / (2 * h)
+    return np.abs(slope) * sigma_std
+
+
+def uncertainty_report(vols: dict, scene) -> dict:
+    """``metrics.json``'s uncertainty figures: the median ``T_std`` [K] (``sigma_std`` where no temperature is
+    inferred) over the reconstruction's flame (where ``|sigma|`` exceeds 5 % of its peak), and where a truth is known
+    :func:`nerif.metrics.uncertainty_scores` (``uncertainty_`` + its names)."""
+    sigma, std = vols["sigma"], vols["sigma_std"]
+    flame = np.abs(sigma) > 0.05 * np.abs(sigma).max() if np.abs(sigma).max() > 0 else np.ones(sigma.shape, bool)
+    out = {"sigma_std_median_flame": float(np.median(std[flame]))}
+    if "T_std" in vols:
+        out["T_std_median_flame_K"] = float(np.median(vols["T_std"][flame]))
+        hottest = np.unravel_index(np.argmax(vols["T"]), sigma.shape)
+        out.update(T_peak_K=float(vols["T"][hottest]), T_std_at_peak_K=float(vols["T_std"][hottest]))
+    if scene.truth_T is not None:
+        truth = scene.ambient.sigma_from_temperature(scene.truth_T)
+        out.update({f"uncertainty_{k}": v for k, v in uncertainty_scores(sigma, std, truth).items()})
+    return out
 
 
 def camera_file(name: str) -> str:
@@ -103,6 +143,8 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     sigma = vols["sigma"]
     if amb.temperature_known:
         vols.update(T=amb.temperature_from_sigma(sigma), n=amb.n_from_sigma(sigma), delta=sigma * amb.delta_thre)
+        if "sigma_std" in vols:
+            vols["T_std"] = temperature_std(amb, sigma, vols["sigma_std"])
     if scene.truth_T is not None:
         vols["T_true"] = scene.truth_T
     origin = [float(a[0]) for a in box.axes()]
@@ -110,7 +152,8 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
               delta_thre=amb.delta_thre, **vols)
     write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, **vols)
     label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
-    save_figure(volume_slices(sigma, scene, f"{label}, {solver.iteration} iterations"), out_dir / "slices.png")
+    save_figure(volume_slices(sigma, scene, f"{label}, {solver.iteration} iterations", vols.get("sigma_std")),
+                out_dir / "slices.png")
     save_figure(curves_figure(solver.history, losses, solver.report.get("images_from_iteration")),
                 out_dir / "curves.png")
     final = dict(solver.history[-1]) if solver.history else solver.evaluate()
@@ -131,6 +174,8 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     final["ray_binning"] = int(scene.cameras[0].binning)  # sensor pixels across a ray
     final.update(solver.report)
     final.update(solver.saturation(sigma, failed))
+    if "sigma_std" in vols:
+        final.update(uncertainty_report(vols, scene))
     if scene.sensing is not None:
         final["displacement_rmse_px"] = float(scene.sensing["displacement_rmse_px"])
         coc = np.atleast_1d(scene.sensing["circle_of_confusion_px"])  # per view
@@ -201,6 +246,9 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
         parts.append(f"kept {whose} field (held out: images {images:.3g}, flow {flow:.3g} {unit})")
     elif m.get("data_term_kept"):  # a series: how often each was kept
         parts.append(f"field kept: {m['data_term_kept']}")
+    if known("T_std_median_flame_K"):
+        parts.append(f"peak {m['T_peak_K']:.0f} +- {m['T_std_at_peak_K']:.0f} K, uncertainty in the flame "
+                     f"{m['T_std_median_flame_K']:.0f} K median (1 std)")
     parts += [f"WARNING: {w}" for w in m.get("warnings", [])]
     resumed = m["wall_time_s"] > m["total_time_s"]  # training of earlier sessions counts, this process's time not
     parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training{' over every session' if resumed else ''} "

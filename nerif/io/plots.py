@@ -21,22 +21,24 @@ def extent(box: ProbeBox, vertical: int) -> list[float]:
 
 
 def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = None, title: str = "",
-                 unit: str = "K", hot: int = 1):
+                 unit: str = "K", hot: int = 1, std: Optional[np.ndarray] = None):
     """Central vertical slice (x-y at z = 0) and horizontal slice (x-z through the hottest layer) of the
-    reconstruction, with the truth and the error where known. ``unit``: of the volume (K, or sigma);
-    ``hot``: +1 where the hottest layer has the largest value, -1 the smallest (sigma). Returns a figure."""
+    reconstruction, with the truth and the error where known, and its standard deviation where estimated (``std``,
+    same unit). ``unit``: of the volume (K, or sigma); ``hot``: +1 where the hottest layer has the largest value,
+    -1 the smallest (sigma). Returns a figure."""
     ref = T_true if T_true is not None else T
     iz = box.shape[2] // 2
     iy = int(np.unravel_index(np.argmax(hot * ref), ref.shape)[1])
     _, ax_y, ax_z = box.axes()
     ext_xy, ext_xz = extent(box, 1), extent(box, 2)
     cols = [("reconstruction", T)] + ([("truth", T_true), ("error", T - T_true)] if T_true is not None else [])
+    cols += [("uncertainty (1 std)", std)] if std is not None else []
     vmin, vmax = float(min(T.min(), ref.min())), float(max(T.max(), ref.max()))
     fig, axes = plt.subplots(2, len(cols), figsize=(3.6 * len(cols), 7.2), squeeze=False)
     for j, (name, vol) in enumerate(cols):
-        err = name == "error"
         lim = float(np.abs(vol).max()) or 1.0
-        kw = dict(cmap="RdBu_r", vmin=-lim, vmax=lim) if err else dict(cmap="inferno", vmin=vmin, vmax=vmax)
+        kw = {"error": dict(cmap="RdBu_r", vmin=-lim, vmax=lim), "uncertainty (1 std)": dict(cmap="viridis", vmin=0,
+              vmax=lim)}.get(name, dict(cmap="inferno", vmin=vmin, vmax=vmax))
         for i, (img, ext, lab) in enumerate([(vol[:, :, iz].T, ext_xy, ("x [mm]", "y [mm]")),
                                               (vol[:, iy, :].T, ext_xz, ("x [mm]", "z [mm]"))]):
             ax = axes[i, j]
@@ -173,3 +175,49 @@ def sensing_figure(record: dict, view: int, crop_px: int = 160, title: str = "")
               ("|u| estimated [px]", mag_e, dict(cmap="viridis", vmin=0, vmax=vmax)),
               ("|u est - u true| [px]", diff, dict(cmap="magma", vmin=0, vmax=float(np.nanmax(diff)) or 1.0))]
     return image_panels(panels, title or f"view {view}")
+
+
+# the colours of the causes a pixel was left out for (nerif.sensing.measurement.CAUSES after "kept")
+CAUSE_COLOURS = ("#9e9e9e", "#ffd400", "#e0218a", "#00b7ff", "#ff5a00")
+
+
+def measured_figure(reference: np.ndarray, displacement: np.ndarray, left_out: np.ndarray, causes: tuple,
+                    title: str = "", unit: str = "px"):
+    """One view's measurement: the reference image (H, W) with the ray-grid pixels left out coloured by cause
+    (``left_out``: (h, w) indices into ``causes``, 0 kept; the legend gives each cause's share of the ray grid), and
+    beside it the displacement magnitude (``displacement``: (h, w, 2) [``unit``], NaN where left out) on the same
+    pixel axes, with a colour bar. Returns a figure."""
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    H, W = reference.shape
+    h, w = left_out.shape
+    extent = (-0.5, W - 0.5, H - 0.5, -0.5)  # image pixels, row 0 at the top
+    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.4 * H / max(W, 1) + 1.0), squeeze=False)
+    ax = axes[0, 0]
+    ax.imshow(reference, cmap="gray", extent=extent, vmin=0, vmax=float(np.max(reference)) or 1.0)
+    overlay = np.ma.masked_equal(left_out, 0)
+    colours = ListedColormap(("#000000",) + CAUSE_COLOURS[:len(causes) - 1])
+    ax.imshow(overlay, cmap=colours, vmin=-0.5, vmax=len(causes) - 0.5, alpha=0.6, extent=extent,
+              interpolation="nearest")
+    shares = [(np.mean(left_out == k), name, CAUSE_COLOURS[k - 1]) for k, name in enumerate(causes) if k]
+    handles = [Patch(color=c, alpha=0.6, label=f"{name} {100 * s:.1f} %") for s, name, c in shares if s > 0]
+    kept = float(np.mean(left_out == 0))
+    ax.legend(handles=handles or [Patch(color="none", label="nothing left out")], loc="lower right", fontsize=7,
+              title=f"kept {100 * kept:.1f} % of the rays", title_fontsize=7, framealpha=0.8)
+    ax.set_title("reference, what was left out and why", fontsize=9)
+    ax = axes[0, 1]
+    magnitude = np.linalg.norm(displacement, axis=-1)
+    finite = magnitude[np.isfinite(magnitude)]
+    im = ax.imshow(magnitude, cmap="viridis", extent=extent, vmin=0,
+                   vmax=float(np.percentile(finite, 99.5)) if finite.size else 1.0, interpolation="nearest")
+    ax.set_facecolor("#d0d0d0")  # left out: no displacement
+    fig.colorbar(im, ax=ax, fraction=0.046, label=f"|displacement| [{unit}]")
+    ax.set_title(f"displacement magnitude ({h} x {w} rays; grey: left out)", fontsize=9)
+    for ax in axes[0]:
+        ax.set_xlabel("column [px]")
+        ax.set_ylabel("row [px]")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig

@@ -131,17 +131,23 @@ def back_project(box: ProbeBox, cameras, images: list[np.ndarray], n_cameras_req
     need = len(cameras) if n_cameras_required is None else int(n_cameras_required)
     if not 1 <= need <= len(cameras):
         raise ValueError(f"n_cameras_required must be within 1..{len(cameras)}, got {need}")
+    if unknown is not None:
+        images = [np.asarray(img, dtype=bool) | u if u is not None else img for img, u in zip(images, unknown)]
+    return views_seeing(box, cameras, images) >= need
+
+
+def views_seeing(box: ProbeBox, cameras, images: list[np.ndarray]) -> np.ndarray:
+    """(nx, ny, nz) int: for each voxel, the number of views whose ``images`` (per view, (height, width) bool) hold
+    the pixel its centre projects to."""
     centres = box.centres().reshape(-1, 3)
     count = np.zeros(len(centres), dtype=np.int32)
-    for v, (cam, img) in enumerate(zip(cameras, images)):
-        if unknown is not None and unknown[v] is not None:
-            img = np.asarray(img, dtype=bool) | unknown[v]
+    for cam, img in zip(cameras, images):
         uv = np.floor(cam.project(centres)).astype(np.int64)
         ok = (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
         hit = np.zeros(len(centres), dtype=bool)
-        hit[ok] = img[uv[ok, 1], uv[ok, 0]]
+        hit[ok] = np.asarray(img, dtype=bool)[uv[ok, 1], uv[ok, 0]]
         count += hit
-    return (count >= need).reshape(box.shape)
+    return count.reshape(box.shape)
 
 
 def unknown_images(scene) -> list:

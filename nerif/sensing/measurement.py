@@ -31,7 +31,7 @@ from nerif.sensing.vectors import median_test
 
 log = logging.getLogger(__name__)
 MEASUREMENT = Registry("measurement stage", package="nerif.sensing")
-LOST_WARNING = 0.5  # a view that keeps less than this share of its region is said to, with the causes
+LOST_WARNING = 0.8  # a view that keeps less than this share of its region is said to, with the causes
 
 
 @dataclass
@@ -54,6 +54,8 @@ class ViewMeasurement:
         distorted: (H, W) the distorted image the flow compared (the flame's light taken off where it was
             recorded), what an image term fits.
         flow: (H, W, 2) the flow itself on the images' grid [px of that grid], kept where asked for, else None.
+        left_out: (h, w) uint8 on the ray grid: why each pixel was left out, an index into :data:`CAUSES` (0: kept),
+            the first cause that took it; None where not recorded (a measurement cached by an older nerif).
     """
 
     displacement: np.ndarray
@@ -61,6 +63,11 @@ class ViewMeasurement:
     found: dict = field(default_factory=dict)
     distorted: Optional[np.ndarray] = None
     flow: Optional[np.ndarray] = None
+    left_out: Optional[np.ndarray] = None
+
+
+# why a pixel of the ray grid was left out (ViewMeasurement.left_out), in the order the stage decides
+CAUSES = ("kept", "outside the region", "saturated", "occluded", "unmeasured", "rejected")
 
 
 def _on_grid(mask: np.ndarray, h: int, w: int) -> np.ndarray:
@@ -147,6 +154,7 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     h, w = grid_px
     H, W = reference.shape
     valid = np.ones((h, w), bool) if region is None else np.asarray(region, dtype=bool).copy()
+    cause = np.where(valid, 0, CAUSES.index("outside the region")).astype(np.uint8)
     # the texture detectors and the flow read the images made ``f`` times smaller where the texture spans many pixels
     scale = texture_scale_px(reference)
     f = shrink_factor(scale, flow_factor)
@@ -161,6 +169,7 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
                              ("occluded", _either(detected, hidden))):
         lost = _on_grid(unreadable, h, w) & valid if unreadable is not None else np.zeros((h, w), bool)
         found[what] = float(lost.mean())
+        cause[lost] = CAUSES.index(what)
         valid &= ~lost
     if flame is not None:
         distorted = without_flame_light(distorted, flame)
@@ -172,6 +181,7 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     u = resample(u_image, h, w).astype(np.float32) * np.float32(image_binning)  # px of the full sensor
     unmeasured = valid & ~np.isfinite(u).all(-1)
     found["unmeasured"] = float(unmeasured.mean())
+    cause[unmeasured] = CAUSES.index("unmeasured")
     valid &= ~unmeasured
     s = np.zeros(2)
     if shake:
@@ -181,6 +191,7 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     found["shake_px"] = [float(s[0]), float(s[1])]
     rejected = median_test(u, valid, median_threshold, median_eps_px) if median_threshold else np.zeros((h, w), bool)
     found["rejected"] = float(rejected.mean())
+    cause[rejected] = CAUSES.index("rejected")
     valid &= ~rejected
     u[~valid] = np.nan
     peak = float(np.linalg.norm(u[valid], axis=-1).max()) if valid.any() else 0.0
@@ -188,7 +199,7 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
                  outside_px=outside_reach(u, valid, quiet),
                  noise=noise_of(distorted, reference, u_image, valid, quiet, f * width))
     say(found, name, region)
-    return ViewMeasurement(u, valid, found, distorted, u_image if keep_flow else None)
+    return ViewMeasurement(u, valid, found, distorted, u_image if keep_flow else None, cause)
 
 
 def say(found: dict, name: str, region: Optional[np.ndarray] = None) -> None:
@@ -229,6 +240,8 @@ def measure_cached(cache_dir, measure: dict, distorted: np.ndarray, reference: n
         m = MEASUREMENT.build(measure, distorted=distorted, reference=reference, name=name, **inputs)
         computed.append(m)
         arrays = {"displacement": m.displacement, "valid": m.valid, "found": np.array(json.dumps(m.found, default=float))}
+        if m.left_out is not None:
+            arrays["left_out"] = m.left_out
         if m.distorted is not distorted:  # the flame's light taken off: not the image given
             arrays["distorted"] = m.distorted
         if m.flow is not None:
@@ -243,4 +256,4 @@ def measure_cached(cache_dir, measure: dict, distorted: np.ndarray, reference: n
     found = json.loads(str(arrays["found"]))
     say(found, name, inputs.get("region"))
     return ViewMeasurement(arrays["displacement"], arrays["valid"], found, arrays.get("distorted", distorted),
-                           arrays.get("flow")), True
+                           arrays.get("flow"), arrays.get("left_out")), True

@@ -10,6 +10,10 @@ import numpy as np
 from nerif.sensing.texture import texture_width
 
 
+GAP = 1  # the radius [texture widths] of the widest sparse patch of a random pattern: an area without texture
+# narrower than twice it is a gap between dots, not an occluder
+
+
 def local_contrast(image: np.ndarray, width_px: float) -> np.ndarray:
     """(H, W) the RMS of ``image``'s detail (less its Gaussian blur of ``width_px``) over a Gaussian window of
     ``width_px``."""
@@ -23,7 +27,9 @@ def occluded(reference: np.ndarray, fraction: float = 0.25, width_px: Optional[f
     """(H, W) bool: the pixels where ``reference`` (H, W) shows no texture: its :func:`local_contrast` over the
     texture's own scale (the flow's normalisation width, :func:`nerif.sensing.texture.texture_width`) below
     ``fraction`` of the background's contrast (the view's median, or half that of its best-textured tenth where
-    most of the view is hidden), grown by 3 such widths (the contrast window and the flow's window
+    most of the view is hidden), in the areas that hold a disc of :data:`GAP` such widths (a morphological opening,
+    each area kept whole: the sparse patches of a random pattern, which show no texture over a width or two, are
+    not occluders), grown by 3 widths (the contrast window and the flow's window
     reach that far across the occluder's edge). A speckle background keeps its contrast within a factor of two or so
     across the image (illumination falls off smoothly); a dark burner tube or mount has none. On the shared dirty capture's burner (5.4 % of each image):
     0.02 % of its pixels missed, none taken beside it. ``width_px``: the texture's width, and ``contrast`` (H, W)
@@ -35,6 +41,13 @@ def occluded(reference: np.ndarray, fraction: float = 0.25, width_px: Optional[f
     if not level > 0:
         return np.zeros(c.shape, bool)
     hidden = (c < fraction * level).astype(np.uint8)
+    if hidden.any():  # only areas wider than a random pattern's sparse patches, whole (a reconstruction)
+        gap = int(np.ceil(GAP * width))
+        core = cv2.morphologyEx(hidden, cv2.MORPH_OPEN,
+                                cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * gap + 1, 2 * gap + 1)))
+        _, labels = cv2.connectedComponents(hidden, connectivity=8)
+        wide = np.unique(labels[core > 0])
+        hidden = np.isin(labels, wide[wide > 0]).astype(np.uint8)
     margin = int(np.ceil(3 * width))
     if hidden.any():
         disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * margin + 1, 2 * margin + 1))

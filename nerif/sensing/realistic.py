@@ -27,7 +27,7 @@ from nerif.cache import cached_arrays
 from nerif.geometry import Camera, ProbeBox, outside_the_box
 from nerif.renderers.voxel import voxel_deflection
 from nerif.sensing.burner import DARK, burner_pixels
-from nerif.sensing.displacement import deflection_to_displacement, displacement_to_deflection
+from nerif.sensing.displacement import deflection_to_displacement
 from nerif.sensing.emission import flame_light
 from nerif.sensing.flow import FLOW, check_flow
 from nerif.sensing.measurement import MEASUREMENT
@@ -165,8 +165,12 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         cache_dir: where the aperture renderings (the costly part) are cached, keyed by the field and the
             optics, so that sweeps over noise, pattern or flow reuse them.
     Returns:
-        eps (N, 3) [rad] (NaN where the flow gave no estimate) and a record for figures: ``reference``,
-        ``distorted`` (V, H, W) uint8 images; ``u_true``, ``u_est`` (V, h, w, 2) displacements [image px] on the
+        None (the observations are the measured displacements, which the scene turns into deflections as it does a
+        capture's: :func:`nerif.data.scene.scene_from_displacements`) and the record: ``displacement_px``
+        (V, h, w, 2) float32 the displacements measured on the ray grid [px of the full sensor] (NaN where the
+        flow gave no estimate), ``valid`` (V, h, w) bool, what the measurement stage kept, and ``left_out``
+        (V, h, w) uint8 why it left the others out; ``found/NAME``
+        (V, ...) what it found; for figures and scores: ``reference``, ``distorted`` (V, H, W) uint8 images; ``u_true``, ``u_est`` (V, h, w, 2) displacements [image px] on the
         training grid; ``displacement_rmse_px`` over the training rays; ``circle_of_confusion_px`` (V,) [image px].
     """
     render_binning = render_binning or rig_binning
@@ -177,8 +181,8 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
     top_mm = -0.5 * float(box.extent_mm[1]) if burner_top_mm is None else float(burner_top_mm)
     step_mm = step_mm or box.voxel_mm
     field_key = hashlib.sha256(delta.cpu().numpy().tobytes()).hexdigest()
-    eps_obs = torch.empty(len(dirs), 3, dtype=torch.float32)
-    rec = {"reference": [], "distorted": [], "u_true": [], "u_est": [], "circle_of_confusion_px": []}
+    rec = {"reference": [], "distorted": [], "u_true": [], "u_est": [], "circle_of_confusion_px": [],
+           "displacement_px": [], "valid": []}
     quiet = outside_the_box(cameras, pixel, view_start)  # pixels whose ray misses the box
     sq_err, count = 0.0, 0
     for v, cam in enumerate(cameras):
@@ -212,8 +216,9 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
 
         u_true_t = resample(u_ren, cam.height, cam.width)
         u_est_t = m.displacement / np.float32(image_binning)  # the figures' unit: px of the images' grid
-        u_obs = torch.as_tensor(m.displacement.reshape(-1, 2)[pix], dtype=torch.float64)
-        eps_obs[sl] = displacement_to_deflection(u_obs, dirs[sl].cpu().double(), cam.unbinned(rig_binning)).float()
+        rec["displacement_px"].append(m.displacement)
+        rec["valid"].append(m.valid)
+        rec.setdefault("left_out", []).append(m.left_out)
         err = (u_est_t.reshape(-1, 2)[pix] - u_true_t.reshape(-1, 2)[pix]) ** 2
         err = err[np.isfinite(err).all(-1)]
         sq_err, count = sq_err + float(err.sum()), count + len(err)
@@ -226,4 +231,4 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
                  float(np.abs(u_ren).max()), coc["d_mm"] / img_cam.pitch_mm)
     record = {k: np.stack(x) for k, x in rec.items()}
     record["displacement_rmse_px"] = np.float64(np.sqrt(sq_err / max(count, 1)))
-    return eps_obs.to(dirs.device), record
+    return None, record

@@ -11,6 +11,8 @@ its solvers in :data:`SOLVERS`.
 """
 from __future__ import annotations
 
+import copy
+
 import logging
 import signal
 import threading
@@ -206,12 +208,18 @@ class IterativeSolver:
         """(nx, ny, nz) sigma on the probe grid: the field as it stands."""
         raise NotImplementedError
 
+    @property
+    def added(self) -> dict[str, np.ndarray]:
+        """Volumes estimated about the result after training (an uncertainty: :mod:`nerif.solvers.uncertainty`),
+        shown with it by :meth:`volumes`."""
+        return self.__dict__.setdefault("_added", {})
+
     def volumes(self) -> dict[str, np.ndarray]:
         """Every volume on the probe grid the solver has to show, each (nx, ny, nz) in the unit of sigma unless its
         name says otherwise: ``sigma`` (:meth:`reconstruction`) here, and what a solver adds (an uncertainty, a
         count of views); :func:`nerif.io.outputs.write_outputs` writes them all, and the temperature of
         ``sigma``."""
-        return {"sigma": self.reconstruction()}
+        return {"sigma": self.reconstruction(), **self.added}
 
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
         """Deflections of sigma (R, 3) of rays (R, 3) through the current reconstruction, in the unit of
@@ -272,6 +280,24 @@ class IterativeSolver:
                                  "same data, or start afresh without train.resume")
         self.load_state_dict(st)
 
+    def snapshot(self) -> dict:
+        """A copy of the whole state (:meth:`state_dict`), for :meth:`restore` after an ensemble's members."""
+        return copy.deepcopy(self.state_dict())
+
+    def restore(self, snapshot: dict) -> None:
+        """Back to the state of :meth:`snapshot`."""
+        self.load_state_dict(snapshot)
+
+    trains_members = False  # whether :meth:`member` is implemented
+
+    def member(self, views: list[int], iterations: int, seed: int, lr_factor: float, stop=None,
+               perturb: float = 0.0) -> None:
+        """Become a member of an ensemble (:mod:`nerif.solvers.uncertainty`): the result, perturbed by ``perturb``
+        (a share of its own size), trained on for ``iterations`` more steps on the training ``views`` only, its own
+        random draws from ``seed``, from ``lr_factor`` of its peak learning rate; ``stop()`` true ends it between
+        steps. Solvers that can override it (and set :attr:`trains_members`)."""
+        raise NotImplementedError
+
     def start_from(self, path: Path) -> None:
         """Start from the final state of another run on data of the same rig and probe box (the previous frame
         of a sequence): what the solver learnt, with fresh optimisation state and counters. Solvers that can
@@ -279,7 +305,7 @@ class IterativeSolver:
         raise ValueError(f"solver={self.name} cannot start a frame from the previous one: use "
                          "sequence.warm_start=false")
 
-    def _checkpoint(self, path: Path) -> None:
+    def checkpoint(self, path: Path) -> None:
         """Save a checkpoint; where the disk refuses it (full, removed), say so and go on: training, and the
         results written after it, matter more than the checkpoint."""
         try:
@@ -292,14 +318,16 @@ class IterativeSolver:
     def fit(self, *, checkpoint_every: int, checkpoint: Optional[Path] = None,
             on_eval: Optional[Callable[[dict], None]] = None, on_step: Optional[Callable[[int, dict], None]] = None,
             progress: bool = True, checkpoint_every_s: Optional[float] = None,
-            resume_hint: Optional[str] = None, threads=None) -> dict:
+            resume_hint: Optional[str] = None, threads=None, checkpoint_at_end: bool = True) -> dict:
         """Run to ``iterations``, or until converged (a step's ``converged`` term, or :attr:`converged` set by an
         evaluation); evaluates every :attr:`eval_every` and at the end, checkpoints (atomically)
         every ``checkpoint_every`` iterations, at most ``checkpoint_every_s`` seconds apart, at the end and on
         Ctrl-C, SIGTERM or SIGUSR2 (then raises :class:`Interrupted`, after one line saying how to continue:
         ``resume_hint``, default ``train.resume=<checkpoint>``). An exception from ``step`` leaves the last good
         checkpoint in place. ``threads``: told each step's time (:meth:`nerif.threads.ThreadTuner.after_step`), it
-        may change the CPU thread count between steps."""
+        may change the CPU thread count between steps. ``checkpoint_at_end`` False: the final state is left for the
+        caller to save (:meth:`checkpoint`) once it has written the results, which then take a nearly full disk's
+        room before the checkpoint does."""
         from tqdm import tqdm
 
         bar = tqdm(total=self.iterations, initial=self.iteration, disable=not progress, mininterval=2.0,
@@ -325,8 +353,8 @@ class IterativeSolver:
                         done = done or self.converged
                     due = self.iteration % checkpoint_every == 0 or done or (
                         checkpoint_every_s is not None and time.monotonic() - saved_at >= checkpoint_every_s)
-                    if checkpoint is not None and due:
-                        self._checkpoint(checkpoint)
+                    if checkpoint is not None and due and not (done and not checkpoint_at_end):
+                        self.checkpoint(checkpoint)
                         saved_at = time.monotonic()
                     if received:
                         raise Interrupted(received[0])

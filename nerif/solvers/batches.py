@@ -2,6 +2,7 @@
 view's 2-D mask."""
 from __future__ import annotations
 
+import copy
 from typing import Optional, Sequence
 
 import torch
@@ -36,6 +37,7 @@ class RayBatcher:
         self.rays_per_batch, self.views_per_batch = int(rays_per_batch), views_per_batch
         self.outside_fraction = float(outside_fraction)
         self.pools = self._pools(scene, inside, allowed)
+        self.drawn = list(range(scene.n_views))  # the views batches are drawn from
 
     @staticmethod
     def _pools(scene: Scene, inside, allowed=None) -> list[tuple[torch.Tensor, Optional[torch.Tensor]]]:
@@ -72,12 +74,18 @@ class RayBatcher:
         return torch.cat([pool[torch.randint(len(pool), (m,), generator=self.generator, device=device)]
                           for pool, m in parts])
 
+    def of_views(self, views: Sequence[int]) -> "RayBatcher":
+        """The same draws from ``views`` only (scene view indices; an ensemble member that leaves the others out)."""
+        out = copy.copy(self)
+        out.drawn = sorted({int(v) for v in views})
+        return out
+
     def views(self, iteration: int) -> list[int]:
         """The views of iteration ``iteration``'s batch: the next ``views_per_batch`` views, cycled, so that every
         view is seen equally often (with ``all``, every view in every batch)."""
-        n = self.scene.n_views
+        n = len(self.drawn)
         k = n if self.views_per_batch == "all" else min(self.views_per_batch, n)
-        return [(iteration * k + j) % n for j in range(k)]
+        return [self.drawn[(iteration * k + j) % n] for j in range(k)]
 
     def __call__(self, iteration: int) -> torch.Tensor:
         """Scene indices of iteration ``iteration``'s ``rays_per_batch`` rays, split evenly over its views."""

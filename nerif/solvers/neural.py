@@ -57,6 +57,7 @@ class NeuralSolver(IterativeSolver):
 
     name = "nerif"
     starts_from_previous = True
+    trains_members = True
 
     def __init__(self, *, encoder: Mapping, field: Mapping, grad: Mapping, sampler: Mapping, loss: Mapping,
                  train: Mapping, metrics: Mapping, seed: int, label: str, data_term: Optional[Mapping] = None):
@@ -227,9 +228,45 @@ class NeuralSolver(IterativeSolver):
         if self.choose_by_heldout() == "flow":
             self.history.pop()
             last = self.evaluate()
-            if kwargs.get("checkpoint") is not None:
-                self._checkpoint(kwargs["checkpoint"])
+            if kwargs.get("checkpoint") is not None and kwargs.get("checkpoint_at_end", True):
+                self.checkpoint(kwargs["checkpoint"])
         return last
+
+    def member(self, views: list[int], iterations: int, seed: int, lr_factor: float, stop=None,
+               perturb: float = 0.0) -> None:
+        """An ensemble member: the field evaluations use (the kept one), its encoder's tables perturbed by Gaussian
+        noise of ``perturb`` times each table's RMS (what the data pin down is pulled back by the training, what
+        they leave free stays perturbed), trained on for ``iterations`` more steps on the observed deflections (the
+        flow's term, noise-weighted as set) of the training ``views`` only, with a fresh optimiser and cosine
+        schedule from ``lr_factor`` of each group's peak rate, a fresh average and its own random draws (``seed``);
+        ``stop()`` true ends it between steps. :meth:`restore` undoes it."""
+        self._kept = getattr(self, "_kept", None) or (self.data_term, self.switch)
+        self.field.load_state_dict({k: v.detach().clone() for k, v in self.estimate.state_dict().items()})
+        self.generator.manual_seed(int(seed))
+        if perturb > 0:
+            with torch.no_grad():
+                for p in self.field.encoder.parameters():
+                    noise = torch.randn(p.shape, generator=self.generator, device=p.device, dtype=p.dtype)
+                    p.add_(noise * (perturb * p.pow(2).mean().sqrt()))
+        flow = getattr(self._kept[0], "flow", self._kept[0])  # the image term's own flow term, or the flow term
+        term = DATA_TERMS.build({"name": "flow", "noise_weighted": flow.noise_weighted})
+        self.data_term, self.switch = term.setup(self.scene, self.batches.of_views(views), iterations), None
+        self.optimizer.state.clear()
+        for g in self.optimizer.param_groups:
+            g["lr"] = g["initial_lr"] = g.setdefault("peak_lr", g["lr"]) * lr_factor
+        self.scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(self.optimizer, T_max=iterations,
+                                                                    eta_min=self.optim_cfg["lr_min"])
+        if self.average is not None:
+            self.average = averaged_field(self.field, self.ema_decay, self.rate)
+        for _ in range(iterations):
+            if stop is not None and stop():
+                return
+            self.step()
+
+    def restore(self, snapshot: dict) -> None:
+        if getattr(self, "_kept", None) is not None:
+            (self.data_term, self.switch), self._kept = self._kept, None
+        super().restore(snapshot)
 
     def _warm_start(self, path: str) -> None:
         """Fit the field to the sigma volume of ``path`` (a ``reconstruction.npz`` of any solver on this probe
