@@ -51,7 +51,8 @@ class ViewEnsemble:
 
     Args:
         members: fields in the ensemble (at least 2).
-        fraction: each member's iterations as a share of the run's (its cost: ``members x fraction`` of a run).
+        fraction: each member's iterations as a share of those the run made (its cost: ``members x fraction`` of a
+            run's training).
         leave_out: training views each member leaves out (at least 1, fewer than the training views less 1).
         lr_factor: each member's learning rate at its start, a share of the run's peak.
         perturb: each member starts from the trained field perturbed by this share of its own size (the encoder's
@@ -97,7 +98,7 @@ class ViewEnsemble:
         ends it between steps and returns nothing."""
         scene = solver.scene
         t0 = time.perf_counter()
-        iterations = max(1, int(round(self.fraction * solver.iterations)))
+        iterations = max(1, int(round(self.fraction * solver.iteration)))  # of those run (a run may stop early)
         kept = solver.snapshot()
         held = scene.heldout is not None and len(scene.heldout.dirs) > 0
         left = left_out_views(scene.n_views, self.members, self.leave_out)
