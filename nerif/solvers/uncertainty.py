@@ -111,15 +111,15 @@ class ViewEnsemble:
                     return {}
                 fields.append(solver.reconstruction())
                 if held:
-                    held_pred.append(solver.evaluation.heldout_predictions(solver.predict) / scene.scale)
+                    held_pred.append(heldout_fit(solver))
                 log.info("uncertainty: member %d of %d (without %s) trained for %d iterations", k + 1, self.members,
                          ", ".join(scene.cameras[v].name for v in out), iterations)
         finally:
             solver.restore(kept)
         spread = np.std(np.stack(fields), axis=0, ddof=1)
         if held:
-            factor, source = calibration(solver.evaluation.heldout_predictions(solver.predict) / scene.scale,
-                                         torch.stack(held_pred), scene.heldout.observed), "held-out views"
+            factor, source = calibration(heldout_fit(solver), torch.stack(held_pred), scene.heldout.observed), \
+                "held-out views"
         else:  # the members started from a field that saw every training view: their residuals there say nothing
             factor, source = 1.0, "none (no held-out view)"
             log.warning("uncertainty: no held-out view to calibrate the members' spread by; sigma_std is their spread "
@@ -137,6 +137,12 @@ class ViewEnsemble:
                            "uncertainty_member_iterations": iterations, "uncertainty_scale": float(factor),
                            "uncertainty_scale_from": source, "uncertainty_time_s": time.perf_counter() - t0,
                            "uncertainty_spread_median": float(np.median(spread))}}
+
+
+def heldout_fit(solver) -> torch.Tensor:
+    """(R, 3) the solver's predicted deflections of every held-out ray, in the unit of ``observed`` (sigma)."""
+    h = solver.scene.heldout
+    return solver.predict(h.origins[h.ray_views()], h.dirs)
 
 
 def calibration(fit: torch.Tensor, members: torch.Tensor, observed: torch.Tensor,
