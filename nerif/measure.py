@@ -30,7 +30,7 @@ def measure_pair(reference: Path, distorted: Path, ray_px: int = 8, flow: str = 
     import cv2
 
     from nerif.data.capture_images import read_images
-    from nerif.sensing.measurement import measure_view
+    from nerif.sensing.measurement import CAUSES, measure_view
     from nerif.sensing.texture import texture_scale_px
     from nerif.sensing.vectors import vector_noise
 
@@ -54,8 +54,6 @@ def measure_pair(reference: Path, distorted: Path, ray_px: int = 8, flow: str = 
     t = time.perf_counter()
     m = measure_view(dist, ref, {"name": flow}, (H // ray_px, W // ray_px), shake=shake, name=distorted.name)
     seconds = time.perf_counter() - t
-    from nerif.sensing.measurement import CAUSES
-
     figures = {"reference": str(reference), "distorted": str(distorted), "image_px": [W, H],
                "ray_px": ray_px, "rays": [W // ray_px, H // ray_px],
                "kept": float(m.valid.mean()),

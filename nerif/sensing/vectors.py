@@ -22,10 +22,11 @@ def _neighbours(u: np.ndarray, valid: np.ndarray, reach: int) -> np.ndarray:
                      for dr in range(-reach, reach + 1) for dc in range(-reach, reach + 1) if dr or dc], -2)
 
 
-def vector_noise(u: np.ndarray, valid: np.ndarray) -> float:
+def vector_noise(u: np.ndarray, valid: np.ndarray, near: np.ndarray | None = None) -> float:
     """The vectors' noise [their unit]: the robust standard deviation (1.4826 times the median absolute value) of
-    each valid vector's difference from the median of its 8 neighbours, both components pooled; 0 with too few."""
-    near = _neighbours(u, valid, 1)
+    each valid vector's difference from the median of its 8 neighbours (``near``: :func:`_neighbours` within 1,
+    where the caller has them), both components pooled; 0 with too few."""
+    near = _neighbours(u, valid, 1) if near is None else near
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         d = (u - np.nanmedian(near, -2))[valid & (np.isfinite(near[..., 0]).sum(-1) >= 3)]
@@ -38,8 +39,8 @@ def median_test(u: np.ndarray, valid: np.ndarray, threshold: float = 2.0, eps_px
     ones (invalid neighbours do not vote; a vector with fewer than 3 valid neighbours is kept), with the floor
     ``max(eps_px, 2 vector_noise)``; a vector that at least :data:`COHERENT` others of its 7 x 7 neighbourhood match
     (each component within the test's bound) is kept."""
-    eps = max(float(eps_px), 2.0 * vector_noise(u, valid))
     near = _neighbours(u, valid, 1)  # (h, w, 8, 2)
+    eps = max(float(eps_px), 2.0 * vector_noise(u, valid, near))
     count = np.isfinite(near[..., 0]).sum(-1)
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a pixel with no valid neighbour: an all-NaN slice
