@@ -50,20 +50,20 @@ def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Opt
     scenes = [scenes] if isinstance(scenes, Scene) else scenes
     listed, first = [], None
     for k, scene in enumerate(scenes):
-        if scene.sensing is None or "distorted" not in scene.sensing:
+        if scene.sensing is None:
             raise ValueError("writing a capture needs images: use data.sensing=realistic")
-        dist = scene.sensing["distorted"]
+        dist = scene.sensing.distorted
         folder = f"frame_{k:04d}/" if series else ""
         listed.append([f"{folder}distorted_{v:02d}.png" for v in range(len(dist))])
         for v, name in enumerate(listed[-1]):
             write_png(root / name, dist[v])
         if first is None:
             first = scene
-            for v, ref in enumerate(scene.sensing["reference"]):
+            for v, ref in enumerate(scene.sensing.reference):
                 write_png(root / f"reference_{v:02d}.png", ref)
     if first is None or (series and len(listed) != len(times)) or (not series and len(listed) != 1):
         raise ValueError(f"{len(listed)} scene(s) for {len(times) if series else 1} frame(s)")
-    n, H, W = first.sensing["distorted"].shape
+    n, H, W = first.sensing.distorted.shape
     if any(c.distortion is not None or c.centre_px is not None or c.aspect != 1.0 for c in first.cameras):
         if series:
             raise ValueError("a time series through a calibrated rig is not written yet: write one state at a time")
@@ -119,7 +119,7 @@ def write_calibration(cameras: list[Camera], images: list[str], references: list
 def write_calibrated(scene: Scene, root: Path, images: list[str], heldout: Optional[list] = None) -> Path:
     """The rig file of version 3 and its calibration file, for a scene of calibrated cameras whose images are
     written (:func:`write_capture`)."""
-    n, H, W = scene.sensing["distorted"].shape
+    n, H, W = scene.sensing.distorted.shape
     cams = [c.unbinned(c.binning) for c in scene.cameras]
     cams = [c.binned(c.width // W) if c.width != W else c for c in cams]  # the images' grid
     refs = [f"reference_{v:02d}.png" for v in range(n)]

@@ -1,4 +1,6 @@
 """Figures: the slices show the right planes and the error, and they are written as PNG images."""
+from types import SimpleNamespace
+
 import cv2
 import numpy as np
 
@@ -40,9 +42,10 @@ def test_curves_heldout_and_sensing_figures_render(tmp_path):
     fig = heldout_figure(obs, obs * 0.5, "px", "held out")
     panels = [a for a in fig.axes if a.images]
     assert np.nanmax(panels[2].images[0].get_array()) == np.sqrt(2) / 2  # |predicted - observed|
-    rec = {"reference": np.zeros((2, 64, 48), np.uint8), "distorted": np.zeros((2, 64, 48), np.uint8),
-           "u_true": np.zeros((2, 8, 6, 2)), "u_est": np.zeros((2, 8, 6, 2))}
-    rec["u_true"][1, 6, 2] = 1.0
+    u_true = np.zeros((2, 8, 6, 2))
+    u_true[1, 6, 2] = 1.0
+    rec = SimpleNamespace(reference=np.zeros((2, 64, 48), np.uint8), distorted=np.zeros((2, 64, 48), np.uint8),
+                          u_true=u_true, u_est=np.zeros((2, 8, 6, 2)))
     fig = sensing_figure(rec, 1, crop_px=16)
     assert fig.axes[0].images[0].get_array().shape == (16, 16)
     assert cv2.imread(str(save_figure(fig, tmp_path / "s.png"))) is not None

@@ -17,6 +17,7 @@ from nerif.physics import Ambient
 from nerif.registry import Registry
 from nerif.renderers.deflection import perpendicular
 from nerif.sensing.displacement import displacement_matrix, displacement_to_deflection
+from nerif.sensing.record import SensingRecord
 
 DATASETS = Registry("dataset", package="nerif.data")
 
@@ -107,8 +108,8 @@ class Scene:
         perpendicular_only: the observations are only the part of each deflection perpendicular to its ray, as
             measured through image displacements (their along-ray component is zero and means nothing); solvers
             then compare only that part. False for ideal sensing (full vectors).
-        sensing: what realistic sensing produced for figures and scores (images, true and estimated
-            displacements; see :func:`nerif.sensing.realistic.realistic`), else None.
+        sensing: what realistic sensing saw and measured, for figures and scores
+            (:class:`nerif.sensing.record.SensingRecord`), else None.
         heldout: the views kept out of training, as a scene of their own (same box and ambient), else None.
         sigma_prior: (a, b) interval of sigma the data say the field lies in, else None (the field's default).
         displacements: (N, 2) the image displacements measured for each ray [px of the full sensor] where the data
@@ -129,7 +130,7 @@ class Scene:
     pixel: torch.Tensor
     view_start: torch.Tensor
     truth_T: Optional[np.ndarray] = None
-    sensing: Optional[dict] = None
+    sensing: Optional[SensingRecord] = None
     perpendicular_only: bool = False
     heldout: Optional["Scene"] = None
     sigma_prior: Optional[tuple] = None

@@ -17,6 +17,7 @@ from nerif.data.scene import (DATASETS, Scene, ViewImages, keep_rays, kept_pixel
 from nerif.geometry import RIGS, rays_in_box
 from nerif.physics import Ambient
 from nerif.sensing.models import SENSING
+from nerif.sensing.record import SensingRecord
 
 _SCENE_CACHE_VERSION = 6
 
@@ -86,12 +87,13 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
                                     pixel=pixel, view_start=view_start, step_mm=render_step_mm,
                                     rig_binning=cameras[0].binning, cache_dir=cache_dir)
         rendered = {"eps": eps.cpu().numpy()} if eps is not None else {}
-        return {**rendered, **{f"sensing/{k}": v for k, v in (record or {}).items()}}
+        return {**rendered, **{f"sensing/{k}": v for k, v in (record.arrays() if record else {}).items()}}
 
     payload = {"v": _SCENE_CACHE_VERSION, "truth": content_digest(ph.T), "phantom": phantom, "rig": rig, "step": render_step_mm,
                "supersample": render_supersample, "sensing": sensing, "sensor": sensor}
     arrays = cached_arrays(cache_dir, "synthetic", payload, observe)
-    record = {k[len("sensing/"):]: v for k, v in arrays.items() if k.startswith("sensing/")} or None
+    sensed = {k[len("sensing/"):]: v for k, v in arrays.items() if k.startswith("sensing/")}
+    record = SensingRecord.from_arrays(sensed) if sensed else None
     if "eps" not in arrays:  # measured from images: built as a capture is, from each view's displacements
         scene = measured_scene(ph, ambient, cameras, (origins, dirs, pixel, view_start), record, sensor, device)
     else:
@@ -110,17 +112,18 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
     return scene
 
 
-def measured_scene(ph, ambient: Ambient, cameras: list, rays: tuple, record: dict, sensor: dict, device) -> Scene:
+def measured_scene(ph, ambient: Ambient, cameras: list, rays: tuple, record: SensingRecord, sensor: dict,
+                   device) -> Scene:
     """The scene of a realistic chain's ``record``: each view's measured displacements, valid pixels, images and
     findings, through :func:`nerif.data.scene.scene_from_displacements` (as a capture's)."""
     binning = int(sensor.get("image_binning", 1))
-    images = [ViewImages(torch.as_tensor(record["reference"][v] / 255.0, dtype=torch.float32, device=device),
-                         torch.as_tensor(record["distorted"][v] / 255.0, dtype=torch.float32, device=device),
+    images = [ViewImages(torch.as_tensor(record.reference[v] / 255.0, dtype=torch.float32, device=device),
+                         torch.as_tensor(record.distorted[v] / 255.0, dtype=torch.float32, device=device),
                          cam.unbinned(cam.binning).binned(binning)) for v, cam in enumerate(cameras)]
-    found = {k[len("found/"):]: v.tolist() for k, v in record.items() if k.startswith("found/")}
-    return scene_from_displacements(ph.box, ambient, cameras, list(record["displacement_px"]), list(record["valid"]),
+    found = {k: v.tolist() for k, v in record.found.items()}
+    return scene_from_displacements(ph.box, ambient, cameras, list(record.displacement_px), list(record.valid),
                                     device=device, rays=rays, images=images, found=found, truth_T=ph.T, sensing=record,
-                                    left_out=list(record["left_out"]) if "left_out" in record else None)
+                                    left_out=list(record.left_out))
 
 
 def with_noise(eps: torch.Tensor, dirs: Optional[torch.Tensor], fraction: float, seed: int) -> torch.Tensor:

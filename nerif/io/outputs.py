@@ -53,10 +53,10 @@ def write_sensing(scene, out_dir: Path, causes: tuple = ()) -> None:
     if rec is None:
         return
     for v, cam in enumerate(scene.cameras):
-        write_png(out_dir / "sensing" / f"reference_view{v:02d}.png", rec["reference"][v])
-        write_png(out_dir / "sensing" / f"distorted_view{v:02d}.png", rec["distorted"][v])
+        write_png(out_dir / "sensing" / f"reference_view{v:02d}.png", rec.reference[v])
+        write_png(out_dir / "sensing" / f"distorted_view{v:02d}.png", rec.distorted[v])
         save_figure(sensing_figure(rec, v, title=f"{cam.name}: displacement RMSE of the flow "
-                                   f"{float(rec['displacement_rmse_px']):.3f} px (all views)"),
+                                   f"{rec.displacement_rmse_px:.3f} px (all views)"),
                     out_dir / "sensing" / f"view{v:02d}.png")
 
 
@@ -177,14 +177,7 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     if "sigma_std" in vols:
         final.update(uncertainty_report(vols, scene))
     if scene.sensing is not None:
-        final["displacement_rmse_px"] = float(scene.sensing["displacement_rmse_px"])
-        coc = np.atleast_1d(scene.sensing["circle_of_confusion_px"])  # per view
-        final["circle_of_confusion_px"] = float(coc.max())  # the widest blur of any view
-        final["circle_of_confusion_px_per_view"] = [float(c) for c in coc]
-        if "shake_true_px" in scene.sensing:  # the vibration the chain put in, to score what was found
-            final["shake_true_px"] = [[float(x) for x in s] for s in scene.sensing["shake_true_px"]]
-        if "occluded_true" in scene.sensing:  # the share of each view's ray grid the chain's burner hides
-            final["occluded_true"] = [float(x) for x in scene.sensing["occluded_true"]]
+        final.update(scene.sensing.report())
     final.update(measurement_report(scene, solver.shakes_px()))
     if amb.temperature_known:
         final["temperature_note"] = ("temperature from n assuming an air-dominated gas of fixed composition "

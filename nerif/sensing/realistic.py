@@ -35,6 +35,7 @@ from nerif.sensing.imaging import add_noise, diffraction_blur, expose, resample,
 from nerif.sensing.models import SENSING
 from nerif.sensing.optics import aperture_points, aperture_rays, circle_of_confusion
 from nerif.sensing.patterns import PATTERNS
+from nerif.sensing.record import SensingRecord
 
 log = logging.getLogger(__name__)
 
@@ -166,12 +167,8 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
             optics, so that sweeps over noise, pattern or flow reuse them.
     Returns:
         None (the observations are the measured displacements, which the scene turns into deflections as it does a
-        capture's: :func:`nerif.data.scene.scene_from_displacements`) and the record: ``displacement_px``
-        (V, h, w, 2) float32 the displacements measured on the ray grid [px of the full sensor] (NaN where the
-        flow gave no estimate), ``valid`` (V, h, w) bool, what the measurement stage kept, and ``left_out``
-        (V, h, w) uint8 why it left the others out; ``found/NAME``
-        (V, ...) what it found; for figures and scores: ``reference``, ``distorted`` (V, H, W) uint8 images; ``u_true``, ``u_est`` (V, h, w, 2) displacements [image px] on the
-        training grid; ``displacement_rmse_px`` over the training rays; ``circle_of_confusion_px`` (V,) [image px].
+        capture's: :func:`nerif.data.scene.scene_from_displacements`) and what the chain saw and measured in each
+        view (:class:`nerif.sensing.record.SensingRecord`).
     """
     render_binning = render_binning or rig_binning
     measure = dict(measure or {"name": "default"})
@@ -181,8 +178,7 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
     top_mm = -0.5 * float(box.extent_mm[1]) if burner_top_mm is None else float(burner_top_mm)
     step_mm = step_mm or box.voxel_mm
     field_key = hashlib.sha256(delta.cpu().numpy().tobytes()).hexdigest()
-    rec = {"reference": [], "distorted": [], "u_true": [], "u_est": [], "circle_of_confusion_px": [],
-           "displacement_px": [], "valid": []}
+    per_view = []  # each view's fields of the record
     quiet = outside_the_box(cameras, pixel, view_start)  # pixels whose ray misses the box
     sq_err, count = 0.0, 0
     for v, cam in enumerate(cameras):
@@ -198,37 +194,29 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         background = torch.as_tensor(PATTERNS.build(pattern, height=H, width=W, seed=seed * 1009 + v,
                                                      samples=pixel_samples))
         shake = np.random.default_rng(seed * 7919 + v).normal(0.0, shake_px, 2)  # px of the full sensor
-        rec.setdefault("shake_true_px", []).append(shake)
         u_img = torch.as_tensor(resample(u_ren, H, W) + (shake / image_binning).astype(np.float32))
         reference, distorted = exposures(background, u_img, coc["d_diff_mm"] / img_cam.pitch_mm, noise_variance,
                                          gain_drift, glow, torch.Generator().manual_seed(seed * 1009 + v), gain_ramp,
                                          tube, pixel_samples)
+        occluded = None
         if tube is not None:  # the share of the ray grid's blocks that see some of the tube
-            blocks = resample(tube.astype(np.float32), cam.height, cam.width) > 0
-            rec.setdefault("occluded_true", []).append(np.float64(blocks.mean()))
+            occluded = np.float64((resample(tube.astype(np.float32), cam.height, cam.width) > 0).mean())
         sl = slice(int(view_start[v]), int(view_start[v + 1]))
         pix = pixel[sl].cpu().numpy()
         m = MEASUREMENT.build(measure, distorted=distorted, reference=reference, flow=flow,
                               grid_px=(cam.height, cam.width), image_binning=image_binning,
                               quiet=quiet[v], name=cam.name)
-        for k, x in m.found.items():
-            rec.setdefault(f"found/{k}", []).append(np.asarray(x, dtype=np.float64))
 
         u_true_t = resample(u_ren, cam.height, cam.width)
         u_est_t = m.displacement / np.float32(image_binning)  # the figures' unit: px of the images' grid
-        rec["displacement_px"].append(m.displacement)
-        rec["valid"].append(m.valid)
-        rec.setdefault("left_out", []).append(m.left_out)
         err = (u_est_t.reshape(-1, 2)[pix] - u_true_t.reshape(-1, 2)[pix]) ** 2
         err = err[np.isfinite(err).all(-1)]
         sq_err, count = sq_err + float(err.sum()), count + len(err)
-        rec["reference"].append(to_uint8(reference))
-        rec["distorted"].append(to_uint8(distorted))
-        rec["u_true"].append(u_true_t.astype(np.float32))
-        rec["u_est"].append(u_est_t.astype(np.float32))
-        rec["circle_of_confusion_px"].append(np.float64(coc["d_mm"] / img_cam.pitch_mm))
+        per_view.append(dict(displacement_px=m.displacement, valid=m.valid, left_out=m.left_out,
+                             reference=to_uint8(reference), distorted=to_uint8(distorted),
+                             u_true=u_true_t.astype(np.float32), u_est=u_est_t.astype(np.float32),
+                             circle_of_confusion_px=np.float64(coc["d_mm"] / img_cam.pitch_mm),
+                             shake_true_px=shake, occluded_true=occluded, found=m.found))
         log.info("%s: true displacement up to %.2f px, circle of confusion %.1f px", cam.name,
                  float(np.abs(u_ren).max()), coc["d_mm"] / img_cam.pitch_mm)
-    record = {k: np.stack(x) for k, x in rec.items()}
-    record["displacement_rmse_px"] = np.float64(np.sqrt(sq_err / max(count, 1)))
-    return None, record
+    return None, SensingRecord.of_views(per_view, np.sqrt(sq_err / max(count, 1)))
