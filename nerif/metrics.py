@@ -87,3 +87,23 @@ def ause(err: np.ndarray, std: np.ndarray, steps: int = 50) -> float:
 
     gap = curve(order_std) - curve(order_err)
     return float(((gap[1:] + gap[:-1]) / 2 * np.diff(shares)).sum() / np.sqrt(sq.mean())) if sq.mean() > 0 else 0.0
+
+
+def temperature_figures(T: np.ndarray, axes: list, hot_K: float, T_true: np.ndarray | None = None) -> dict:
+    """What a combustion researcher reports of a temperature field ``T`` (nx, ny, nz) [K] on voxel centres ``axes``
+    (x, y, z [mm]): its peak ``T_peak_K`` and where it lies ``T_peak_position_mm`` (x, y, z), and the flame's
+    volume ``flame_volume_cm3``, the voxels above ``hot_K`` [K]; where a truth is known, the same of the truth
+    (``_true``) and the peak's error ``T_peak_error_K`` (reconstructed less true; negative: too cold)."""
+    voxel_cm3 = float(np.prod([abs(a[1] - a[0]) if len(a) > 1 else 1.0 for a in axes])) / 1000.0
+
+    def of(field: np.ndarray, suffix: str) -> dict:
+        hottest = np.unravel_index(np.argmax(field), field.shape)
+        return {f"T_peak{suffix}_K": float(field[hottest]),
+                f"T_peak_position{suffix}_mm": [float(a[i]) for a, i in zip(axes, hottest)],
+                f"flame_volume{suffix}_cm3": float(np.count_nonzero(field > hot_K)) * voxel_cm3}
+
+    out = {**of(T, ""), "flame_volume_above_K": float(hot_K)}
+    if T_true is not None:
+        out.update(of(T_true, "_true"))
+        out["T_peak_error_K"] = out["T_peak_K"] - out["T_peak_true_K"]
+    return out

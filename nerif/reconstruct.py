@@ -18,6 +18,7 @@ from nerif.data import DATASETS
 from nerif.data.scene import hot_evidence, view_directions, view_span_deg
 from nerif.io.export import write_json
 from nerif.io.outputs import RESULTS, summary_line, volume_slices, write_masks, write_outputs, write_sensing
+from nerif.io.plots import profiles_figure
 from nerif.masks import MASKS
 from nerif.sensing.measurement import CAUSES
 from nerif.solvers import SOLVERS, Interrupted
@@ -159,11 +160,13 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
         if "sigma_std" in solver.added:
             writer.add_figure("uncertainty", volume_slices(solver.reconstruction(), scene, "uncertainty",
                                                            solver.added["sigma_std"]), solver.iteration)
+        writer.add_figure("profiles", volume_slices(solver.reconstruction(), scene, f"iteration {solver.iteration}",
+                                                    solver.added.get("sigma_std"), profiles_figure), solver.iteration)
     finally:
         writer.close()
 
     try:
-        metrics = write_outputs(solver, scene, out_dir, losses)
+        metrics = write_outputs(solver, scene, out_dir, losses, flame_above_K=cfg.metrics.flame_above_K)
         about = dict(about or {})
         earlier = about.pop("warnings", [])
         said = earlier + rig_warnings + metrics.get("warnings", []) + records.messages

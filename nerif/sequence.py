@@ -143,7 +143,7 @@ def log_frame(writer, row: dict, folder: Path) -> None:
             writer.add_scalar(f"frame/{k}", float(v), row["frame"])
     vol, truth, unit, box = frame_volume(folder)
     writer.add_figure("frame/slices", slice_figure(vol, box, truth, f"frame {row['frame']}, t = {row['time_s']:.4g} s",
-                                                   unit=unit, hot=1 if unit == "K" else -1), row["frame"])
+                                                   unit=unit), row["frame"])
     writer.flush()
 
 

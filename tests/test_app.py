@@ -278,6 +278,20 @@ def test_the_summary_line_names_each_held_out_figure_as_metrics_json_does():
     assert "PSNR undefined (no deflection seen)" in line  # not "PSNR -inf dB"
 
 
+def test_the_summary_line_names_the_peak_temperature_the_true_one_and_the_flames_volume():
+    """Issue 50: the temperatures a researcher reports, beside the RMSE that hides the tip."""
+    from nerif.io.outputs import summary_line
+
+    m = {"temperature_rmse_K": 18.8, "deflection_rmse": 1e-5, "iterations": 10, "wall_time_s": 1.0,
+         "total_time_s": 2.0, "ms_per_iteration": 100.0, "T_peak_K": 1542.4, "T_peak_position_mm": [0.5, 31.5, -0.5],
+         "flame_volume_cm3": 12.34, "flame_volume_above_K": 1000.0}
+    line = summary_line(m, Path("out"))
+    assert "T RMSE 18.8 K | peak T 1542 K at (0.5, 31.5, -0.5) mm, 12.3 cm3 above 1000 K |" in line
+    m.update(T_peak_true_K=1861.0, T_peak_error_K=-318.6, flame_volume_true_cm3=15.1, T_std_at_peak_K=112.0)
+    assert "peak T 1542 +- 112 K at (0.5, 31.5, -0.5) mm (true 1861 K, -319 K), 12.3 cm3 above 1000 K (true 15.1)" in \
+        summary_line(m, Path("out"))
+
+
 def test_the_share_of_the_held_out_displacements_explained_falls_with_the_fit_and_leads_the_summary():
     """Issue 38: a quality figure without a truth: 1 - (fit RMSE / no-flame RMSE)^2 of the held-out view, 0.75 for
     an RMSE half the displacements' own, negative for a fit worse than no flame; first of the held-out figures."""

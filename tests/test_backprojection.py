@@ -52,14 +52,14 @@ def test_a_view_with_no_signal_warns_and_gets_an_empty_mask(scene):
                             "T_max": 2000.0})
     sl = slice(int(quiet.view_start[2]), int(quiet.view_start[3]))
     quiet.eps[sl] = 0.0
-    with pytest.warns(UserWarning, match="camera 2 .* 2-D mask is empty"):
+    with pytest.warns(UserWarning, match="camera 02 .* 2-D mask is empty"):
         masks = MASKS.build({"name": "2d", "threshold": 1e-3, "radius_px": 2}, scene=quiet)
     assert len(masks.inside[2]) == 0
     quiet.eps[:] = 0.0  # every view silent: one warning naming them all, not one per view
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         MASKS.build({"name": "2d", "threshold": 1e-3, "radius_px": 2}, scene=quiet)
-    assert len(caught) == 1 and str(caught[0].message).startswith("camera 0 (0.0 deg), camera 1 (33.0 deg)")
+    assert len(caught) == 1 and str(caught[0].message).startswith("camera 00 (0.0 deg), camera 01 (33.0 deg)")
     assert str(caught[0].message).endswith("their 2-D masks are empty")
 
 
@@ -67,7 +67,7 @@ def test_a_view_with_no_signal_is_left_out_of_the_visual_hull(scene):
     quiet = DATASETS.build({"name": "synthetic", "render_supersample": 1, "phantom": SPHERE,
                             "rig": {"name": "arc", "n_cameras": 6, "binning": 20}, "T_max": 2000.0})
     quiet.eps[quiet.view_slice(2)] = 0.0  # a camera that failed: before, its empty mask carved the whole hull
-    with pytest.warns(UserWarning, match="camera 2 .* 2-D mask is empty"):
+    with pytest.warns(UserWarning, match="camera 02 .* 2-D mask is empty"):
         masks = MASKS.build({"name": "3d"}, scene=quiet)
     others = MASKS.build({"name": "3d"}, scene=quiet.select_views([0, 1, 3, 4, 5]))
     assert masks.volume.any() and np.array_equal(masks.volume, others.volume)

@@ -65,7 +65,7 @@ def test_train_on_a_capture_with_a_held_out_view(written, tmp_path, mask):
     assert np.isfinite(m["heldout_psnr_db"]) and np.isfinite(m["heldout_displacement_psnr_db"])
     assert "temperature_rmse_K" not in m  # no ground truth, no temperature error claimed
     assert m["ambient_faces"]  # auto never leaves the level unpinned (here the flow's smoothing inflates the masks)
-    number = int(h.cameras[0].name.split()[1])  # "camera 4 (160.0 deg)": the figure is named by its camera
+    number = int(h.cameras[0].name.split()[1])  # "camera 04 (160.0 deg)": the figure is named by its camera
     assert [p.name for p in (tmp_path / "heldout").iterdir()] == [f"camera{number:02d}.png"]
     assert (tmp_path / "reconstruction.npz").is_file()
 
@@ -323,7 +323,7 @@ def test_optional_rig_keys_left_null_take_their_defaults(written, tmp_path):
     (tmp_path / RIG_FILE).write_text(yaml.safe_dump(rig))
     cap = capture(str(tmp_path), FLOW, binning=8)
     assert cap.ambient.T_max == 2000.0
-    assert cap.n_views == 6 and cap.heldout.n_views == 1 and cap.heldout.cameras[0].name.startswith("camera 6 ")
+    assert cap.n_views == 6 and cap.heldout.n_views == 1 and cap.heldout.cameras[0].name.startswith("camera 06 ")
 
 
 def test_a_patch_without_estimates_is_unknown_and_carves_no_flame(written, monkeypatch):

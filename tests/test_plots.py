@@ -5,30 +5,51 @@ import cv2
 import numpy as np
 
 from nerif.geometry import ProbeBox
-from nerif.io.plots import curves_figure, heldout_figure, save_figure, sensing_figure, slice_figure
+from nerif.io.plots import (curves_figure, heldout_figure, profiles_figure, save_figure, sensing_figure,
+                             slice_figure)
 
 BOX = ProbeBox((6, 8, 4), 2.0)
 
 
-def test_slices_show_the_central_xy_plane_and_the_hottest_layer_with_the_error(tmp_path):
+def test_slices_show_the_central_xy_plane_and_fixed_heights_with_the_error(tmp_path):
     truth = np.full(BOX.shape, 300.0)
-    truth[2, 5, 1] = 1500.0  # the hottest layer is y index 5
+    truth[2, 5, 1] = 1500.0
     rec = truth + 10.0
     fig = slice_figure(rec, BOX, truth, "test")
     axes = [a for a in fig.axes if a.images]  # the panels, without their colour bars
     assert [a.get_title() for a in axes[:3]] == ["reconstruction [K], z = 1.0 mm", "truth [K], z = 1.0 mm",
                                                  "error [K], z = 1.0 mm"]
-    assert axes[3].get_title() == f"reconstruction [K], y = {BOX.axes()[1][5]:.1f} mm"
-    np.testing.assert_array_equal(axes[3].images[0].get_array(), rec[:, 5, :].T)
+    # horizontal slices at a quarter, half and three quarters of the box's height (y indices 2, 4, 6 of 8),
+    # whatever the field: two runs on the same box show the same planes
+    assert [a.get_title() for a in axes[3::3]] == [f"reconstruction [K], y = {y:.1f} mm" for y in (-3.0, 1.0, 5.0)]
+    np.testing.assert_array_equal(axes[3].images[0].get_array(), rec[:, 2, :].T)
     np.testing.assert_array_equal(axes[2].images[0].get_array(), np.full((8, 6), 10.0))
+    assert axes[0].get_ylabel() == "y [mm] (burner axis)" and axes[3].get_xlabel() == "x [mm]"
     img = cv2.imread(str(save_figure(fig, tmp_path / "slices.png")))
     assert img is not None and img.shape[0] > 300 and img.std() > 10
 
 
+def test_profiles_follow_the_axis_and_cross_it_at_the_slices_heights(tmp_path):
+    truth = np.full(BOX.shape, 300.0)
+    truth[3, :, 2] = 300.0 + 100.0 * np.arange(8)  # hotter up the axis (x index 3, z index 2 at x = z = 0)
+    std = np.full(BOX.shape, 5.0)
+    fig = profiles_figure(truth + 20.0, BOX, truth, "p", std=std)
+    axial, *across = fig.axes
+    rec_line, true_line = axial.get_lines()[:2]
+    np.testing.assert_array_equal(rec_line.get_xdata(), BOX.axes()[1])
+    np.testing.assert_array_equal(true_line.get_ydata(), truth[3, :, 2])
+    np.testing.assert_array_equal(rec_line.get_ydata(), truth[3, :, 2] + 20.0)
+    assert axial.get_xlabel() == "y [mm]" and axial.get_ylabel() == "T [K]"
+    assert [a.get_title() for a in across] == [f"across, y = {y:.1f} mm (z = 0)" for y in (-3.0, 1.0, 5.0)]
+    np.testing.assert_array_equal(across[0].get_lines()[0].get_ydata(), truth[:, 2, 2] + 20.0)
+    assert [t.get_text() for t in axial.get_legend().get_texts()] == ["reconstruction", "+- 1 std", "truth"]
+    assert cv2.imread(str(save_figure(fig, tmp_path / "profiles.png"))) is not None
+
+
 def test_without_a_truth_only_the_reconstruction_is_shown():
-    fig = slice_figure(np.zeros(BOX.shape), BOX, None, unit="sigma", hot=-1)
+    fig = slice_figure(np.zeros(BOX.shape), BOX, None, unit="sigma")
     panels = [a for a in fig.axes if a.images]
-    assert len(panels) == 2 and panels[0].get_title().startswith("reconstruction [sigma]")
+    assert len(panels) == 4 and panels[0].get_title().startswith("reconstruction [sigma]")
 
 
 def test_curves_heldout_and_sensing_figures_render(tmp_path):

@@ -29,7 +29,7 @@ def test_impossible_rig_settings_are_refused_naming_the_key(kwargs, message):
 
 def test_a_camera_inside_the_box_or_a_background_before_its_far_side_is_refused():
     box = ProbeBox((100, 100, 100), 1.0)
-    with pytest.raises(ValueError, match="camera 0 .* is inside the probe box"):
+    with pytest.raises(ValueError, match="camera 00 .* is inside the probe box"):
         rays_in_box(box, arc_rig(n_cameras=1, distance_mm=30.0, background_behind_mm=800.0, binning=40))
     with pytest.raises(ValueError, match="its background, 820 mm away, is not behind the probe box .* 850 mm away"):
         rays_in_box(box, arc_rig(n_cameras=1, distance_mm=800.0, background_behind_mm=20.0, binning=40))

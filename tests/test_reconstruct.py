@@ -48,7 +48,7 @@ def test_the_sign_check_says_swapped_only_when_the_views_agree():
     eps = scene.eps.clone()
     for v in range(4):  # four views reversed outright, two as measured
         eps[scene.view_slice(v)] *= -1
-    with pytest.raises(ValueError, match="the views disagree: camera 0 .*, camera 3 .* show cold gas, camera 4 .*"
+    with pytest.raises(ValueError, match="the views disagree: camera 00 .*, camera 03 .* show cold gas, camera 04 .*"
                                          "a hot flame; the displacements of the first look wrong") as e:
         check_sign(replace(scene, eps=eps), None)
     assert "swapped" not in str(e.value) and "reversed" not in str(e.value)

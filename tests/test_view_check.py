@@ -24,8 +24,8 @@ def test_one_bad_view_is_left_out_named_and_carves_nothing(written, tmp_path, ca
     with caplog.at_level("WARNING"):
         cap = capture(_variant(written, tmp_path, None, edit), FLOW, binning=8)
     left = [r.getMessage() for r in caplog.records if "is left out" in r.getMessage()]
-    assert len(left) == 1 and left[0].startswith("camera 2 (") and reason in left[0], left
-    assert cap.n_views == 5 and cap.heldout.n_views == 1 and all(not c.name.startswith("camera 2 ") for c in cap.cameras)
+    assert len(left) == 1 and left[0].startswith("camera 02 (") and reason in left[0], left
+    assert cap.n_views == 5 and cap.heldout.n_views == 1 and all(not c.name.startswith("camera 02 ") for c in cap.cameras)
     flame = written[1].truth_T - written[1].ambient.T0 > 50.0
     assert MASKS.build({"name": "3d"}, scene=cap).volume[flame].all()
 
@@ -39,7 +39,7 @@ def test_a_clean_capture_leaves_no_view_out_and_too_many_bad_views_stop_the_run(
         for k in range(4):
             _write(d / f"distorted_{k:02d}.png", np.zeros_like(_read(d / f"distorted_{k:02d}.png")))
 
-    with pytest.raises(ValueError, match="only 2 of the 6 training views are usable .*camera 0 .*lost the background"):
+    with pytest.raises(ValueError, match="only 2 of the 6 training views are usable .*camera 00 .*lost the background"):
         capture(_variant(written, tmp_path, None, blank), FLOW, binning=8)
 
 

@@ -251,7 +251,7 @@ def arc_rig(
     for k, th in enumerate(angles):
         pos = distance_mm * np.array([np.sin(th), 0.0, np.cos(th)])
         cam = Camera(pos, look_at_origin(pos), image_distance, pitch_um * 1e-3, width_px, height_px,
-                     f_number, background_mm, focal_mm, name=f"camera {k} ({np.rad2deg(th):.1f} deg)")
+                     f_number, background_mm, focal_mm, name=f"camera {k:02d} ({np.rad2deg(th):.1f} deg)")
         cams.append(cam.binned(binning) if binning > 1 else cam)
     return cams
 

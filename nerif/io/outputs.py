@@ -15,13 +15,13 @@ import numpy as np
 import torch
 
 from nerif.io.export import write_npz, write_png, write_vti
-from nerif.metrics import uncertainty_scores
-from nerif.io.plots import (curves_figure, heldout_figure, measured_figure, save_figure, sensing_figure,
-                             slice_figure)
+from nerif.metrics import temperature_figures, uncertainty_scores
+from nerif.io.plots import (curves_figure, heldout_figure, measured_figure, profiles_figure, save_figure,
+                             sensing_figure, slice_figure)
 
 log = logging.getLogger(__name__)
 # the files every run writes (held-out figures, masks and sensing pictures beside them where there are any)
-RESULTS = ("reconstruction.npz", "reconstruction.vti", "slices.png", "curves.png", "metrics.json")
+RESULTS = ("reconstruction.npz", "reconstruction.vti", "slices.png", "profiles.png", "curves.png", "metrics.json")
 
 
 def write_masks(masks, scene, out_dir: Path) -> None:
@@ -60,13 +60,15 @@ def write_sensing(scene, out_dir: Path, causes: tuple = ()) -> None:
                     out_dir / "sensing" / f"view{v:02d}.png")
 
 
-def volume_slices(sigma: np.ndarray, scene, title: str, sigma_std: Optional[np.ndarray] = None):
-    """Slices of the temperature (with the truth where known), or of sigma when no temperature can be inferred;
-    with their standard deviation where estimated (``sigma_std``)."""
+def volume_slices(sigma: np.ndarray, scene, title: str, sigma_std: Optional[np.ndarray] = None,
+                  figure=slice_figure):
+    """``figure`` (:func:`~nerif.io.plots.slice_figure`, :func:`~nerif.io.plots.profiles_figure`) of the temperature
+    (with the truth where known), or of sigma when no temperature can be inferred; with their standard deviation
+    where estimated (``sigma_std``)."""
     if not scene.ambient.temperature_known:
-        return slice_figure(sigma, scene.box, None, title, unit="sigma", hot=-1, std=sigma_std)
+        return figure(sigma, scene.box, None, title, unit="sigma", std=sigma_std)
     std = temperature_std(scene.ambient, sigma, sigma_std) if sigma_std is not None else None
-    return slice_figure(scene.ambient.temperature_from_sigma(sigma), scene.box, scene.truth_T, title, std=std)
+    return figure(scene.ambient.temperature_from_sigma(sigma), scene.box, scene.truth_T, title, std=std)
 
 
 def temperature_std(ambient, sigma: np.ndarray, sigma_std: np.ndarray) -> np.ndarray:
@@ -85,8 +87,8 @@ def uncertainty_report(vols: dict, scene) -> dict:
     out = {"sigma_std_median_flame": float(np.median(std[flame]))}
     if "T_std" in vols:
         out["T_std_median_flame_K"] = float(np.median(vols["T_std"][flame]))
-        hottest = np.unravel_index(np.argmax(vols["T"]), sigma.shape)
-        out.update(T_peak_K=float(vols["T"][hottest]), T_std_at_peak_K=float(vols["T_std"][hottest]))
+        hottest = np.unravel_index(np.argmax(vols["T"]), sigma.shape)  # the voxel of T_peak_K
+        out["T_std_at_peak_K"] = float(vols["T_std"][hottest])
     if scene.truth_T is not None:
         truth = scene.ambient.sigma_from_temperature(scene.truth_T)
         out.update({f"uncertainty_{k}": v for k, v in uncertainty_scores(sigma, std, truth).items()})
@@ -136,8 +138,9 @@ def failed_fit(m: dict) -> str:
     return ""
 
 
-def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
-    """Volumes (.npz, .vti), slice and curve PNGs, held-out figures, and the metrics of the final state."""
+def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float) -> dict:
+    """Volumes (.npz, .vti), slice, profile and curve PNGs, held-out figures, and the metrics of the final state
+    (the flame's volume: where T is above ``flame_above_K`` [K])."""
     amb, box = scene.ambient, scene.box
     vols = dict(solver.volumes())
     sigma = vols["sigma"]
@@ -152,8 +155,9 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
               delta_thre=amb.delta_thre, **vols)
     write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, **vols)
     label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
-    save_figure(volume_slices(sigma, scene, f"{label}, {solver.iteration} iterations", vols.get("sigma_std")),
-                out_dir / "slices.png")
+    title = f"{label}, {solver.iteration} iterations"
+    save_figure(volume_slices(sigma, scene, title, vols.get("sigma_std")), out_dir / "slices.png")
+    save_figure(volume_slices(sigma, scene, title, vols.get("sigma_std"), profiles_figure), out_dir / "profiles.png")
     save_figure(curves_figure(solver.history, losses, solver.report.get("images_from_iteration")),
                 out_dir / "curves.png")
     final = dict(solver.history[-1]) if solver.history else solver.evaluate()
@@ -174,6 +178,8 @@ def write_outputs(solver, scene, out_dir: Path, losses) -> dict:
     final["ray_binning"] = int(scene.cameras[0].binning)  # sensor pixels across a ray
     final.update(solver.report)
     final.update(solver.saturation(sigma, failed))
+    if amb.temperature_known:
+        final.update(temperature_figures(vols["T"], box.axes(), flame_above_K, scene.truth_T))
     if "sigma_std" in vols:
         final.update(uncertainty_report(vols, scene))
     if scene.sensing is not None:
@@ -206,6 +212,21 @@ def measurement_report(scene, refined: Optional[torch.Tensor] = None) -> dict:
     return {"measurement": per_view, **({"shake_px_max": max(shakes)} if shakes else {})}
 
 
+def temperature_words(m: dict) -> str:
+    """The summary line's temperatures: the peak (+- one standard deviation where estimated) and where it is, the
+    true peak and the peak's error where a truth is known, and the flame's volume."""
+    std = f" +- {m['T_std_at_peak_K']:.0f}" if m.get("T_std_at_peak_K") is not None else ""
+    where = m.get("T_peak_position_mm")
+    at = f" at ({', '.join(f'{c:.1f}' for c in where)}) mm" if isinstance(where, list) else ""
+    true = (f" (true {m['T_peak_true_K']:.0f} K, {m['T_peak_error_K']:+.0f} K)"
+            if m.get("T_peak_true_K") is not None else "")
+    volume = ""
+    if m.get("flame_volume_cm3") is not None and m.get("flame_volume_above_K") is not None:
+        volume = f", {m['flame_volume_cm3']:.3g} cm3 above {m['flame_volume_above_K']:.0f} K" + (
+            f" (true {m['flame_volume_true_cm3']:.3g})" if m.get("flame_volume_true_cm3") is not None else "")
+    return f"peak T {m['T_peak_K']:.0f}{std} K{at}{true}{volume}"
+
+
 def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
     """One line of the run's headline figures, each named as in ``metrics.json`` (after ``prefix``)."""
     def known(k):
@@ -215,6 +236,8 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
     if known("temperature_rmse_K"):
         flame = f" (flame {m['temperature_rmse_flame_K']:.1f} K)" if known("temperature_rmse_flame_K") else ""
         parts.append(f"T RMSE {m['temperature_rmse_K']:.1f} K{flame}")
+    if known("T_peak_K"):
+        parts.append(temperature_words(m))
     unit = "sigma" if "deflection_unit" in m else "rad"
     parts.append(f"deflection RMSE {m['deflection_rmse']:.3g} {unit}")
     if known("heldout_deflection_rmse"):
@@ -240,8 +263,7 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
     elif m.get("data_term_kept"):  # a series: how often each was kept
         parts.append(f"field kept: {m['data_term_kept']}")
     if known("T_std_median_flame_K"):
-        parts.append(f"peak {m['T_peak_K']:.0f} +- {m['T_std_at_peak_K']:.0f} K, uncertainty in the flame "
-                     f"{m['T_std_median_flame_K']:.0f} K median (1 std)")
+        parts.append(f"uncertainty in the flame {m['T_std_median_flame_K']:.0f} K median (1 std)")
     parts += [f"WARNING: {w}" for w in m.get("warnings", [])]
     resumed = m["wall_time_s"] > m["total_time_s"]  # training of earlier sessions counts, this process's time not
     parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training{' over every session' if resumed else ''} "

@@ -20,34 +20,83 @@ def extent(box: ProbeBox, vertical: int) -> list[float]:
     return [axes[0][0] - h, axes[0][-1] + h, axes[vertical][0] - h, axes[vertical][-1] + h]
 
 
+# the heights of the horizontal slices and of the profiles across the axis: fractions of the probe box's height
+# from its bottom, the same for every run on the same box
+HEIGHTS = (0.25, 0.5, 0.75)
+
+
+def height_indices(box: ProbeBox) -> list[int]:
+    """The y indices of :data:`HEIGHTS` on ``box``: the voxel layer nearest each."""
+    ny = box.shape[1]
+    return [min(int(f * ny), ny - 1) for f in HEIGHTS]
+
+
 def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = None, title: str = "",
-                 unit: str = "K", hot: int = 1, std: Optional[np.ndarray] = None):
-    """Central vertical slice (x-y at z = 0) and horizontal slice (x-z through the hottest layer) of the
-    reconstruction, with the truth and the error where known, and its standard deviation where estimated (``std``,
-    same unit). ``unit``: of the volume (K, or sigma); ``hot``: +1 where the hottest layer has the largest value,
-    -1 the smallest (sigma). Returns a figure."""
+                 unit: str = "K", std: Optional[np.ndarray] = None):
+    """The central vertical slice (x-y at z = 0, the burner axis in it) and horizontal slices (x-z) at the heights
+    :data:`HEIGHTS` of the box (dashed on the vertical slice), of the reconstruction ``T`` (nx, ny, nz), with the
+    truth and the error (reconstruction less truth) where known, and its standard deviation where estimated (``std``,
+    same unit). ``unit``: of the volumes (K, or sigma). Returns a figure."""
     ref = T_true if T_true is not None else T
     iz = box.shape[2] // 2
-    iy = int(np.unravel_index(np.argmax(hot * ref), ref.shape)[1])
     _, ax_y, ax_z = box.axes()
     ext_xy, ext_xz = extent(box, 1), extent(box, 2)
     cols = [("reconstruction", T)] + ([("truth", T_true), ("error", T - T_true)] if T_true is not None else [])
     cols += [("uncertainty (1 std)", std)] if std is not None else []
     vmin, vmax = float(min(T.min(), ref.min())), float(max(T.max(), ref.max()))
-    fig, axes = plt.subplots(2, len(cols), figsize=(3.6 * len(cols), 7.2), squeeze=False)
+    rows = [("x-y", None)] + [("x-z", iy) for iy in height_indices(box)]
+    fig, axes = plt.subplots(len(rows), len(cols), figsize=(3.6 * len(cols), 3.4 * len(rows)), squeeze=False)
     for j, (name, vol) in enumerate(cols):
         lim = float(np.abs(vol).max()) or 1.0
         kw = {"error": dict(cmap="RdBu_r", vmin=-lim, vmax=lim), "uncertainty (1 std)": dict(cmap="viridis", vmin=0,
               vmax=lim)}.get(name, dict(cmap="inferno", vmin=vmin, vmax=vmax))
-        for i, (img, ext, lab) in enumerate([(vol[:, :, iz].T, ext_xy, ("x [mm]", "y [mm]")),
-                                              (vol[:, iy, :].T, ext_xz, ("x [mm]", "z [mm]"))]):
+        for i, (plane, iy) in enumerate(rows):
             ax = axes[i, j]
+            img, ext = (vol[:, :, iz].T, ext_xy) if iy is None else (vol[:, iy, :].T, ext_xz)
             im = ax.imshow(img, origin="lower", extent=ext, **kw)
-            ax.set_xlabel(lab[0])
-            ax.set_ylabel(lab[1])
-            where = f"z = {ax_z[iz]:.1f} mm" if i == 0 else f"y = {ax_y[iy]:.1f} mm"
+            ax.set_xlabel("x [mm]")
+            ax.set_ylabel("y [mm] (burner axis)" if iy is None else "z [mm]")
+            where = f"z = {ax_z[iz]:.1f} mm" if iy is None else f"y = {ax_y[iy]:.1f} mm"
             ax.set_title(f"{name} [{unit}], {where}", fontsize=9)
-            fig.colorbar(im, ax=ax, fraction=0.046)
+            if iy is None:
+                for k in height_indices(box):
+                    ax.axhline(ax_y[k], color="w", lw=0.6, ls="--")
+            fig.colorbar(im, ax=ax, fraction=0.046, label=f"{name} [{unit}]")
+    if title:
+        fig.suptitle(title + " (dashed: the heights of the horizontal slices)", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def profiles_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = None, title: str = "",
+                    unit: str = "K", std: Optional[np.ndarray] = None):
+    """Temperature along the burner axis (x = z = 0, against y) and across it (along x at z = 0) at the heights
+    :data:`HEIGHTS`, of the reconstruction ``T`` (nx, ny, nz) [``unit``] (with one standard deviation shaded where
+    ``std`` is given) and of the truth where known (dashed). Lengths in mm. Returns a figure."""
+    ax_x, ax_y, _ = box.axes()
+    ix, iz = box.shape[0] // 2, box.shape[2] // 2  # the voxel column nearest the axis
+    heights = height_indices(box)
+    fig, axes = plt.subplots(1, 1 + len(heights), figsize=(4.2 * (1 + len(heights)), 4.2), squeeze=False)
+    lines = [(ax_y, T[ix, :, iz], None if std is None else std[ix, :, iz],
+              None if T_true is None else T_true[ix, :, iz], "along the burner axis (x = z = 0)", "y [mm]")]
+    lines += [(ax_x, T[:, iy, iz], None if std is None else std[:, iy, iz],
+               None if T_true is None else T_true[:, iy, iz], f"across, y = {ax_y[iy]:.1f} mm (z = 0)", "x [mm]")
+              for iy in heights]
+    lo = min(float(np.min(T)), float(np.min(T_true)) if T_true is not None else np.inf)
+    hi = max(float(np.max(T)), float(np.max(T_true)) if T_true is not None else -np.inf)
+    pad = 0.05 * (hi - lo) or 1.0
+    for ax, (pos, rec, sd, true, name, xlabel) in zip(axes[0], lines):
+        ax.plot(pos, rec, color="C3", label="reconstruction")
+        if sd is not None:
+            ax.fill_between(pos, rec - sd, rec + sd, color="C3", alpha=0.25, label="+- 1 std")
+        if true is not None:
+            ax.plot(pos, true, color="k", ls="--", label="truth")
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(f"T [{unit}]" if unit == "K" else f"[{unit}]")
+        ax.set_ylim(lo - pad, hi + pad)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
