@@ -14,7 +14,7 @@ from hydra.errors import OverrideParseException
 from omegaconf import DictConfig
 
 from nerif.app import run, unexpected
-from nerif.configs import check_kinds, config_dir, group_choices
+from nerif.configs import check_kinds, config_dir, group_choices, unknown_override
 from nerif.io.export import write_json
 from nerif.io.summary import FAILED
 from nerif.solvers import DivergenceError, Interrupted
@@ -103,7 +103,7 @@ def main(cfg: DictConfig) -> float:
 def cli() -> None:
     """``python -m nerif``: an override Hydra cannot read is one sentence (Hydra's own is its grammar's), then the
     run."""
-    message = unreadable_override(sys.argv[1:])
+    message = unreadable_override(sys.argv[1:]) or unknown_override(sys.argv[1:])
     if message:
         print(f"nerif: {message}", file=sys.stderr)
         sys.exit(2)

@@ -129,3 +129,59 @@ def check_kinds(cfg: DictConfig, defaults: DictConfig, overrides: Sequence[str])
         need = _kind(*plain)
         if need:
             raise ValueError(f"{key}={plain[1]}: {need} (its default: {plain[0]})")
+
+
+def unknown_override(args: Sequence[str]) -> Optional[str]:
+    """One sentence for the first command-line override that names a config-group option or a setting nerif does
+    not have (``encoder=hsh``, ``train.iteration=300``, ``field.hash_level=4``), with the nearest it has; None.
+    ``+key=value`` adds a key on purpose (:func:`check_complete` judges it); Hydra's own settings (``hydra.*``) are
+    Hydra's to check."""
+    import difflib
+
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    def nearest(word: str, known) -> Optional[str]:
+        near = difflib.get_close_matches(word, sorted(known), n=1, cutoff=0.6)
+        return near[0] if near else None
+
+    parser = OverridesParser.create()
+    try:
+        parsed = [o for o in parser.parse_overrides([a for a in args if "=" in a and not a.startswith("-")])]
+    except Exception:  # a value Hydra cannot read: said elsewhere
+        return None
+    root = config_dir()
+    groups = {p.name for p in root.iterdir() if p.is_dir() and p.name != "hydra"}
+    settings = []
+    for o in parsed:
+        key = o.key_or_group
+        if key.startswith("hydra") or o.is_delete():
+            continue
+        if key in groups:
+            options = {p.stem for p in (root / key).glob("*.yaml")}
+            values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [o.get_value_element_as_str()]
+            for value in values:
+                if value not in options:
+                    near = nearest(value, options)
+                    return (f"{key}={value}: {key} has no option {value!r}"
+                            + (f" (did you mean {key}={near}?)" if near else "")
+                            + f"; its options: {', '.join(sorted(options))}")
+        elif not o.is_add() and not o.is_force_add():
+            settings.append(key)
+    if not settings:
+        return None
+    cfg = compose(group_choices([a for a in args if "=" in a and not a.startswith("-")]))
+    for key in settings:
+        node, path = cfg, []
+        parts = key.split(".")
+        for i, part in enumerate(parts):
+            if not isinstance(node, DictConfig) or part not in node:
+                known = list(node.keys()) if isinstance(node, DictConfig) else []
+                where = ".".join(path)
+                near = nearest(part, [k for k in known if k != "hydra"])
+                guess = ".".join([*path, str(near), *parts[i + 1:]])
+                hint = f" (did you mean {guess}?)" if near else (
+                    f"; {where or 'the top level'} has {', '.join(str(k) for k in known if k != 'hydra')}"
+                    if known else "")
+                return f"{key}: not a setting nerif knows{hint}"
+            node, path = node[part], path + [part]
+    return None

@@ -140,9 +140,35 @@ def prior_interval(configured=None, data_prior=None) -> tuple[float, float]:
     return a, b
 
 
-def check_truth_within(truth_T: Optional[np.ndarray], ambient: Ambient, prior: tuple[float, float]) -> None:
+def bound_words(ambient: Ambient, source: Optional[str]) -> str:
+    """What sets the field's hot bound, as a user would edit it (``source``: :func:`prior_source`)."""
+    return f"set by {source}" if source else f"set by data.T_max={ambient.T_max:g} K"
+
+
+def hot_bound_advice(hottest_K: float, ambient: Ambient, prior: tuple[float, float], source: Optional[str]) -> str:
+    """The setting to change so that the field can reach ``hottest_K`` [K]: the one that bounds it (``source``:
+    :func:`prior_source`; None: the default prior, bounded by ``data.T_max``)."""
+    target = float(np.ceil(hottest_K / 50) * 50)
+    if source is None:
+        return f"set data.T_max={target:.0f} or higher"
+    if source == "field.prior":
+        a = float(np.floor((ambient.sigma_from_temperature(np.float64(target)) - 0.05) * 100) / 100)
+        return f"set field.prior=[{a:g}, {prior[1]:g}] or lower (sigma of {target:.0f} K with a margin)"
+    return f"raise the upper temperature of {source} to {target:.0f} K or higher (it bounds the field, not data.T_max)"
+
+
+def prior_source(configured, data_prior_from: Optional[str]) -> Optional[str]:
+    """What sets the field's prior (:func:`prior_interval`), as a user would edit it: ``field.prior`` when set, else
+    the data's own setting (``data_prior_from``, e.g. a rig file's ``temperature_range_K``), else None (the
+    default interval, scaled by ``data.T_max``)."""
+    return "field.prior" if configured is not None else data_prior_from
+
+
+def check_truth_within(truth_T: Optional[np.ndarray], ambient: Ambient, prior: tuple[float, float],
+                       source: Optional[str] = None) -> None:
     """Refuse a known truth (nx, ny, nz) [K] that a field of sigma in ``prior`` cannot represent (hotter than
-    the prior's bound allows), in one sentence naming the setting to raise. Nothing where no truth is known."""
+    the prior's bound allows), in one sentence naming the setting to raise (``source``: what sets the prior,
+    :func:`prior_source`). Nothing where no truth is known."""
     if truth_T is None or not ambient.temperature_known:
         return
     sigma = ambient.sigma_from_temperature(truth_T)
@@ -154,13 +180,13 @@ def check_truth_within(truth_T: Optional[np.ndarray], ambient: Ambient, prior: t
     if sigma.min() < prior[0] - 1e-6:
         hottest = float(truth_T.max())
         bound = float(ambient.temperature_from_sigma(np.float64(prior[0])))
-        raise ValueError(f"the true field reaches {hottest:.0f} K, beyond what the field can represent with "
-                         f"data.T_max={ambient.T_max:g} K (up to {bound:.0f} K at the prior's bound sigma = "
-                         f"{prior[0]:g}): set data.T_max={np.ceil(hottest / 50) * 50:.0f} or higher")
+        raise ValueError(f"the true field reaches {hottest:.0f} K, beyond what the field can represent (up to "
+                         f"{bound:.0f} K at the prior's bound sigma = {prior[0]:g}, {bound_words(ambient, source)}): "
+                         f"{hot_bound_advice(hottest, ambient, prior, source)}")
 
 
 def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Ambient,
-                     truth_T: Optional[np.ndarray] = None, failed: str = "") -> dict:
+                     truth_T: Optional[np.ndarray] = None, failed: str = "", source: Optional[str] = None) -> dict:
     """What a reconstruction ``sigma`` says about the prior's bounds, for ``metrics.json``: the share of the flame
     (voxels below -0.05) within 1 % of the lower bound (``warnings`` over 1 %: the flame may be hotter than
     ``data.T_max`` lets the field be), and the share of the probe box within 1 % of the upper, cold bound
@@ -190,10 +216,14 @@ def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Amb
                     "say the fit failed, so the data do not support a hotter flame: raising data.T_max would not help; "
                     "look at the measurement first")
     elif share > 0.01:
-        what = (f"the hottest {ambient.temperature_from_sigma(np.float64(a)):.0f} K the field can hold "
-                f"(data.T_max={ambient.T_max:g} K)" if ambient.temperature_known else f"the prior's bound sigma = {a:g}")
-        warn.append(f"{100 * share:.1f} % of the flame sits at {what}: it may be hotter; raise "
-                    f"{'data.T_max' if ambient.temperature_known else 'field.prior'}")
+        if ambient.temperature_known:
+            hottest = float(ambient.temperature_from_sigma(np.float64(a)))
+            warn.append(f"{100 * share:.1f} % of the flame sits at the hottest {hottest:.0f} K the field can hold "
+                        f"({bound_words(ambient, source)}): it may be hotter; "
+                        f"{hot_bound_advice(hottest + 100.0, ambient, prior, source)}")
+        else:
+            warn.append(f"{100 * share:.1f} % of the flame sits at the prior's bound sigma = {a:g}: it may be hotter; "
+                        "lower the first value of field.prior")
     if warn:
         out["warnings"] = warn
         log.warning("%s", warn[0])

@@ -19,6 +19,7 @@ from nerif.data.scene import hot_evidence, view_directions, view_span_deg
 from nerif.io.export import write_json
 from nerif.io.outputs import RESULTS, summary_line, volume_slices, write_masks, write_outputs, write_sensing
 from nerif.io.plots import profiles_figure
+from nerif.io.units import metric_units
 from nerif.masks import MASKS
 from nerif.sensing.measurement import CAUSES
 from nerif.solvers import SOLVERS, Interrupted
@@ -179,6 +180,7 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
         metrics["peak_memory_gib"] = peak_memory_gib()
         metrics["total_time_s"] = time.perf_counter() - t_start
         metrics.update(about)
+        metrics["units"] = metric_units(metrics)
         write_json(metrics, out_dir / "metrics.json")
     except OSError as e:  # a full disk: one sentence saying what is there and what is not
         solver.checkpoint(checkpoint)  # the final state where it still fits, for a resumed run to write them from

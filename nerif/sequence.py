@@ -30,6 +30,7 @@ from nerif.data.frames import FRAMES, Frame
 from nerif.geometry import ProbeBox
 from nerif.io.export import write_json, write_pvd
 from nerif.io.outputs import summary_line
+from nerif.io.units import metric_units
 from nerif.io.plots import save_figure, sequence_figure, slice_figure
 from nerif.io.summary import COLUMNS, write_tables
 from nerif.reconstruct import reconstruct, resuming
@@ -122,6 +123,7 @@ def run_sequence(cfg: DictConfig, out_dir: Path, device: torch.device, frames: l
     if unit is not None:
         metrics["deflection_unit"] = unit
     metrics["total_time_s"] = time.perf_counter() - t_start
+    metrics["units"] = metric_units(metrics)
     write_json(metrics, out_dir / "metrics.json")
     print(summary_line(metrics, out_dir, f"{len(rows)} frame{'s' * (len(rows) != 1)}, means: "), flush=True)
     return metrics

@@ -24,16 +24,18 @@ import yaml
 from hydra.errors import HydraException
 
 from nerif.app import unexpected
-from nerif.configs import check_complete, check_kinds, compose, group, group_choices
+from nerif.configs import check_complete, check_kinds, compose, group, group_choices, unknown_override
 from nerif.data import DATASETS
 from nerif.sequence import frames_of
 from nerif.data.rig_file import RIG_FILE, RIG_VERSION, read_rig
 from nerif.data.scene import Scene
 from nerif.geometry import Camera
-from nerif.io.export import atomic_write, write_png
+from nerif.io.export import atomic_write, write_npz, write_png
+from nerif.io.units import VOLUMES
 from nerif.sensing.optics import probe_distance_mm
 
 log = logging.getLogger("nerif")
+TRUTH_FILE = "volume.npz"  # the rendered truth, beside the images (a series: in each frame's folder)
 
 
 def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Optional[list] = None) -> Path:
@@ -54,6 +56,7 @@ def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Opt
             raise ValueError("writing a capture needs images: use data.sensing=realistic")
         dist = scene.sensing.distorted
         folder = f"frame_{k:04d}/" if series else ""
+        write_truth(scene, root / f"{folder}{TRUTH_FILE}")
         listed.append([f"{folder}distorted_{v:02d}.png" for v in range(len(dist))])
         for v, name in enumerate(listed[-1]):
             write_png(root / name, dist[v])
@@ -89,6 +92,15 @@ def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Opt
         "# nerif capture rig file (format: docs/captures.md); written from a synthetic scene\n"
         + yaml.safe_dump(rig, sort_keys=False, default_flow_style=None)))
     return root
+
+
+def write_truth(scene: Scene, path: Path) -> Path:
+    """The temperature the scene was rendered from, as the shared captures hold it: ``T`` (nx, ny, nz) [K] on the
+    capture's probe grid, ``sigma``, ``voxel_mm``, ``T0`` [K], ``n0``, ``delta_thre``; its ``units`` entry says
+    each unit. A run scores itself against it with ``data.truth=PATH``."""
+    amb = scene.ambient
+    return write_npz(path, units=VOLUMES, T=scene.truth_T, sigma=amb.sigma_from_temperature(scene.truth_T),
+                     voxel_mm=scene.box.voxel_mm, T0=amb.T0, n0=amb.n0, delta_thre=amb.delta_thre)
 
 
 def write_calibration(cameras: list[Camera], images: list[str], references: list[str], path: Path) -> Path:
@@ -175,6 +187,9 @@ def write(path: Path, overrides: list[str], overwrite: bool = False) -> Path:
     folder first, which then takes the place of ``path`` (an interrupted write leaves ``path`` as it was)."""
     path = target_folder(path, overwrite)
     fixed = ["data=synthetic", "data.sensing=realistic"]
+    slip = unknown_override(fixed + list(overrides))
+    if slip:
+        raise ValueError(slip)
     cfg = compose(fixed + list(overrides))
     check_complete(cfg)
     check_kinds(cfg, compose(fixed + group_choices(overrides)), overrides)
@@ -236,7 +251,10 @@ def main(argv=None) -> Path:
     rig = read_rig(root)
     views, n = rig.n_views, len(rig.frames) if len(rig.frames) > 1 else 0
     what = f"{n} frame{'s' * (n != 1)} of {views} views" if n else f"{views} views"
-    print(f"capture of {what} written to {root}; reconstruct it with: python -m nerif data=capture data.root={root}")
+    truth = f" data.truth={root / TRUTH_FILE}" if n == 0 else ""
+    print(f"capture of {what} written to {root} with the truth it was rendered from ({TRUTH_FILE}"
+          f"{' in each frame folder' if n else ''}); reconstruct it and score it against that truth with: "
+          f"python -m nerif data=capture data.root={root}{truth}")
     return root
 
 

@@ -47,8 +47,10 @@ def test_a_run_writes_every_output(tmp_path):
     z = np.load(out / "reconstruction.npz")
     assert z["T"].shape == z["n"].shape == z["delta"].shape == (16, 16, 16)
     np.testing.assert_allclose(z["delta"], z["n"] / float(z["n0"]) - 1, atol=1e-12)
-    for f in ("reconstruction.vti", "slices.png", "curves.png", "checkpoint.pt", ".hydra/config.yaml"):
+    for f in ("reconstruction.vti", "slices.png", "profiles.png", "curves.png", "checkpoint.pt", ".hydra/config.yaml"):
         assert (out / f).is_file(), f
+    assert {k for k, u in m["units"].items() if u == "?"} == set() and m["units"]["temperature_rmse_K"] == "K"
+    assert m["T_peak_true_K"] == pytest.approx(float(z["T_true"].max())) and m["T_peak_K"] == float(z["T"].max())
     events = list((out / "tensorboard").glob("events.out.tfevents.*"))
     assert events
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
@@ -58,7 +60,7 @@ def test_a_run_writes_every_output(tmp_path):
     for tag in ("train/loss", "train/lr", "train/loss_discrete", "eval/temperature_rmse_K",
                 "eval/deflection_rmse_auto", "eval/deflection_rmse_discrete"):
         assert tag in tags["scalars"], tag
-    assert "slices" in tags["images"]
+    assert {"slices", "profiles"} <= set(tags["images"]), tags["images"]
     # resume to 30 iterations from the checkpoint
     r2 = nerif_here(*TINY, "train.iterations=30", f"train.resume={out / 'checkpoint.pt'}",
                     f"hydra.run.dir={tmp_path / 'more'}")
@@ -114,7 +116,7 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
 
 
 @pytest.mark.parametrize("override, message", [
-    ("encoder=fourier", "Available options in 'encoder'"),
+    ("encoder=fourier", "encoder=fourier: encoder has no option 'fourier'; its options: frequency, hash, none"),
     ("encoder.name=fourier", "unknown encoder 'fourier'; registered encoders: frequency, hash, none"),
     ("solver=cgls solver.regularizer=tv", "needs a weight solver.lam > 0"),
     ("solver=cgls solver.lam=-1", "solver.lam=-1: a regularisation weight is at least 0"),
@@ -130,10 +132,19 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("rig.binning=-2", "rig.binning=-2: pixel binning must be a whole number of at least 1"),
     ("device=gpu", "device=gpu is not one nerif runs on; use auto, cpu, cuda or cuda:N"),
     ("device=mps", "device=mps is not one nerif runs on"),
-    ("data.T_max=600", "beyond what the field can represent with data.T_max=600 K (up to 632 K"),
-    ("phantom.T_peak=1000000", "beyond what the field can represent with data.T_max=2000 K (up to 2808 K"),
+    ("data.T_max=600", "beyond what the field can represent (up to 632 K at the prior's bound sigma = -1.05, set by "
+                       "data.T_max=600 K): set data.T_max="),
+    ("phantom.T_peak=1000000", "beyond what the field can represent (up to 2808 K at the prior's bound sigma = -1.05, "
+                               "set by data.T_max=2000 K): set data.T_max="),
     ("+train.iteration=5", "train.iteration: not a setting nerif knows (did you mean train.iterations?)"),  # issue 28
     ("+seeds=3", "seeds: not a setting nerif knows (did you mean seed?)"),
+    # issue 50: a slip without "+" got Hydra's advice to add "+" (a key nerif would ignore): the nearest key instead
+    ("train.iteration=300", "train.iteration: not a setting nerif knows (did you mean train.iterations?)"),
+    ("encoder=hsh", "encoder=hsh: encoder has no option 'hsh' (did you mean encoder=hash?); its options: frequency, "
+                    "hash, none"),
+    ("data.sensor.noise_varance=1e-4", "data.sensor.noise_varance: not a setting nerif knows (did you mean "
+                                       "data.sensor.noise_variance?)"),
+    ("trian.iterations=3", "trian.iterations: not a setting nerif knows (did you mean train.iterations?)"),
     ("train.iterations=abc", "train.iterations=abc: a number (its default: 1200)"),  # issue 38: by kind
     ("seed=abc", "seed=abc: a number (its default: 0)"),
     ("field.hidden=64", "field.hidden=64: a list (its default: [64, 64])"),
@@ -161,7 +172,7 @@ def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
 @pytest.mark.parametrize("override, message", [
     ("train.lr=0", "train.lr=0: the peak learning rate, a positive number"),  # a component's check
     ("train.iterations=abc", "train.iterations=abc: a number (its default: 1200)"),  # the kinds' check
-    ("encoder=fourier", "Available options in 'encoder'"),  # Hydra's own
+    ("encoder=fourier", "encoder=fourier: encoder has no option 'fourier'"),  # before Hydra composes
 ])
 def test_bad_input_in_a_new_python_exits_with_status_2_and_no_traceback(tmp_path, override, message):
     """The sentences above are tested in this process; the contract with the shell holds in a new Python."""
@@ -195,6 +206,7 @@ def test_a_realistic_run_writes_its_images_and_displacement_error(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     m = json.loads((tmp_path / "metrics.json").read_text())
     assert 0 < m["displacement_rmse_px"] < 0.1 and m["circle_of_confusion_px"] > 1
+    assert {k for k, u in m["units"].items() if u == "?"} == set()
     for v in range(6):
         for stem in ("reference_view", "distorted_view", "view"):
             assert (tmp_path / "sensing" / f"{stem}{v:02d}.png").stat().st_size > 1000

@@ -64,6 +64,9 @@ def test_train_on_a_capture_with_a_held_out_view(written, tmp_path, mask):
     assert m["heldout_displacement_rmse_px"] < 0.6 * rms_obs, (m["heldout_displacement_rmse_px"], rms_obs)
     assert np.isfinite(m["heldout_psnr_db"]) and np.isfinite(m["heldout_displacement_psnr_db"])
     assert "temperature_rmse_K" not in m  # no ground truth, no temperature error claimed
+    assert m["T_peak_K"] > 296.15 and len(m["T_peak_position_mm"]) == 3 and "T_peak_true_K" not in m
+    unknown = {k for k, u in m["units"].items() if u == "?"}
+    assert not unknown and m["units"]["heldout_displacement_rmse_px"] == "px", unknown  # issue 50: every key's unit
     assert m["ambient_faces"]  # auto never leaves the level unpinned (here the flow's smoothing inflates the masks)
     number = int(h.cameras[0].name.split()[1])  # "camera 04 (160.0 deg)": the figure is named by its camera
     assert [p.name for p in (tmp_path / "heldout").iterdir()] == [f"camera{number:02d}.png"]

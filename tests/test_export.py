@@ -21,6 +21,26 @@ def test_vti_holds_the_volume_x_fastest(tmp_path):
     np.testing.assert_array_equal(data.transpose(2, 1, 0), vol)
 
 
+def test_the_volumes_say_their_units_in_vti_field_data_and_npz(tmp_path):
+    """Issue 50: VTK's string field data (each string's bytes, 0-terminated, as vtkXMLImageDataWriter writes them)
+    and an ``units`` entry of the ``.npz``."""
+    import json
+
+    from nerif.io.export import write_npz
+    from nerif.io.units import VOLUMES
+
+    vol = np.zeros((2, 3, 4))
+    write_vti(tmp_path / "v.vti", 0.5, [0, 0, 0], units=VOLUMES, T=vol, sigma=vol)
+    root = ET.parse(tmp_path / "v.vti").getroot()
+    field = root.find("ImageData/FieldData/Array")
+    assert field.get("Name") == "units" and field.get("type") == "String" and field.get("NumberOfTuples") == "3"
+    words = bytes(int(c) for c in field.text.split()).split(b"\0")[:-1]
+    assert [w.decode() for w in words] == ["T: K", f"sigma: {VOLUMES['sigma']}", "lengths: mm"]
+    assert [a.get("units") for a in root.iter("DataArray")] == ["K", VOLUMES["sigma"]]
+    write_npz(tmp_path / "v.npz", units=VOLUMES, T=vol, voxel_mm=0.5)
+    assert json.loads(str(np.load(tmp_path / "v.npz")["units"])) == {"T": "K", "voxel_mm": "mm"}
+
+
 def test_atomic_write_leaves_the_old_file_on_failure(tmp_path):
     p = tmp_path / "metrics.json"
     write_json({"a": 1}, p)

@@ -230,6 +230,29 @@ def test_only_the_measured_part_is_compared_when_the_scene_says_so():
     assert float((across - measured).norm(dim=-1).max()) < 0.01 * float(measured.norm(dim=-1).max())  # 0.0025
 
 
+def test_the_advice_names_the_setting_that_bounds_the_field():
+    """Issue 50: a rig whose temperature_range_K bounds the field at 1000 K was told to raise data.T_max (2000 K
+    already): the advice names what sets the prior, a rig file's range, field.prior or data.T_max."""
+    from nerif.field import check_truth_within, hot_bound_advice, prior_interval, prior_source
+    from nerif.physics import Ambient
+
+    amb = Ambient(296.15, 1.00027, 2000.0)
+    rig = "temperature_range_K [296.15, 1000.0] in cap/rig.yaml"
+    prior = (float(amb.sigma_from_temperature(1000.0)) - 0.05, 0.05)  # as a capture's sigma_prior gives it
+    truth = np.full((4, 4, 4), 296.15)
+    truth[1, 1, 1] = 1861.0
+    with pytest.raises(ValueError, match=r"set by temperature_range_K \[296.15, 1000.0\] in cap/rig.yaml\): raise the "
+                                         r"upper temperature of temperature_range_K .* to 1900 K or higher \(it bounds "
+                                         r"the field, not data.T_max\)"):
+        check_truth_within(truth, amb, prior, prior_source(None, rig))
+    assert prior_source([-0.5, 0.05], rig) == "field.prior" and prior_source(None, None) is None
+    advice = hot_bound_advice(1861.0, amb, prior_interval([-0.5, 0.05]), "field.prior")
+    a = float(advice.split("[")[1].split(",")[0])
+    assert advice.startswith("set field.prior=[") and amb.temperature_from_sigma(np.float64(a)) >= 1900.0
+    with pytest.raises(ValueError, match=r"set by data.T_max=2000 K\): set data.T_max=5800 or higher"):
+        check_truth_within(truth * 3.1, amb, prior_interval(None, None))
+
+
 def test_a_flame_at_the_prior_bound_is_reported_with_the_setting_to_raise():
     tr = neural_solver()
     sigma = np.zeros((10, 10, 10))
@@ -239,7 +262,7 @@ def test_a_flame_at_the_prior_bound_is_reported_with_the_setting_to_raise():
     out = tr.saturation(sigma)
     assert out["flame_at_prior_bound"] == pytest.approx(0.4)
     assert len(out["warnings"]) == 1 and out["warnings"][0].startswith("40.0 % of the flame sits at the hottest 2808 K the field can hold "
-                                     "(data.T_max=2000 K)") and "raise data.T_max" in out["warnings"][0]
+                                     "(set by data.T_max=2000 K)") and "set data.T_max=2950 or higher" in out["warnings"][0]
     from nerif.field import prior_saturation  # issue 28: a diverged run blamed data.T_max, the truth far below it
 
     cool = np.full_like(sigma, 600.0)

@@ -18,7 +18,7 @@ def test_slices_show_the_central_xy_plane_and_fixed_heights_with_the_error(tmp_p
     fig = slice_figure(rec, BOX, truth, "test")
     axes = [a for a in fig.axes if a.images]  # the panels, without their colour bars
     assert [a.get_title() for a in axes[:3]] == ["reconstruction [K], z = 1.0 mm", "truth [K], z = 1.0 mm",
-                                                 "error [K], z = 1.0 mm"]
+                                                 "error (reconstruction - truth) [K], z = 1.0 mm"]
     # horizontal slices at a quarter, half and three quarters of the box's height (y indices 2, 4, 6 of 8),
     # whatever the field: two runs on the same box show the same planes
     assert [a.get_title() for a in axes[3::3]] == [f"reconstruction [K], y = {y:.1f} mm" for y in (-3.0, 1.0, 5.0)]
@@ -32,9 +32,12 @@ def test_slices_show_the_central_xy_plane_and_fixed_heights_with_the_error(tmp_p
 def test_profiles_follow_the_axis_and_cross_it_at_the_slices_heights(tmp_path):
     truth = np.full(BOX.shape, 300.0)
     truth[3, :, 2] = 300.0 + 100.0 * np.arange(8)  # hotter up the axis (x index 3, z index 2 at x = z = 0)
+    truth[0, 4, 0] = 2000.0  # the peak off the axis: a profile up its column too
     std = np.full(BOX.shape, 5.0)
     fig = profiles_figure(truth + 20.0, BOX, truth, "p", std=std)
-    axial, *across = fig.axes
+    axial, through, *across = fig.axes
+    assert through.get_title() == "vertical through the true peak (x = -5.0, z = -3.0 mm)"
+    np.testing.assert_array_equal(through.get_lines()[1].get_ydata(), truth[0, :, 0])
     rec_line, true_line = axial.get_lines()[:2]
     np.testing.assert_array_equal(rec_line.get_xdata(), BOX.axes()[1])
     np.testing.assert_array_equal(true_line.get_ydata(), truth[3, :, 2])
@@ -42,6 +45,9 @@ def test_profiles_follow_the_axis_and_cross_it_at_the_slices_heights(tmp_path):
     assert axial.get_xlabel() == "y [mm]" and axial.get_ylabel() == "T [K]"
     assert [a.get_title() for a in across] == [f"across, y = {y:.1f} mm (z = 0)" for y in (-3.0, 1.0, 5.0)]
     np.testing.assert_array_equal(across[0].get_lines()[0].get_ydata(), truth[:, 2, 2] + 20.0)
+    on_axis = np.full(BOX.shape, 300.0)
+    on_axis[3, 4, 2] = 1000.0
+    assert len(profiles_figure(on_axis, BOX).axes) == 4  # a field hottest on the axis: no extra column
     assert [t.get_text() for t in axial.get_legend().get_texts()] == ["reconstruction", "+- 1 std", "truth"]
     assert cv2.imread(str(save_figure(fig, tmp_path / "profiles.png"))) is not None
 
@@ -55,14 +61,22 @@ def test_without_a_truth_only_the_reconstruction_is_shown():
 def test_curves_heldout_and_sensing_figures_render(tmp_path):
     hist = [{"iteration": i, "wall_time_s": i * 0.1, "temperature_rmse_K": 100.0 / i} for i in (1, 2, 3)]
     fig = curves_figure(hist, [(i, {"loss": 1.0 / i, "loss_discrete": 0.9 / i}) for i in (1, 2, 3)], images_from=2)
-    assert fig.axes[1].get_ylabel() == "temperature_rmse_K"
+    assert fig.axes[1].get_ylabel() == "T RMSE over the probe box [K]"
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]  # each term, the data term in two parts
-    assert labels == ["total", "data term (discrete gradients): flow deflections",
+    assert labels == ["total (sum of the terms)", "data term (discrete gradients): flow deflections",
                       "data term (discrete gradients): images + flow"]
+    assert fig.axes[0].get_lines()[0].get_zorder() > fig.axes[0].get_lines()[1].get_zorder()  # the total on top
+    one = curves_figure([{"iteration": 5, "wall_time_s": 0.5, "deflection_rmse": 2e-4}], [],
+                        deflection_unit="sigma").axes[1]
+    assert one.get_ylabel() == "deflection RMSE on training rays [sigma]"
+    assert [t.get_text() for t in one.texts][0] == "0.0002 at iteration 5"  # one evaluation is said, not one dot
     obs = np.ones((8, 6, 2))
-    fig = heldout_figure(obs, obs * 0.5, "px", "held out")
+    obs[0, 0] = np.nan
+    fig = heldout_figure(obs, obs * 0.5, "px", "held out", block_px=4)
     panels = [a for a in fig.axes if a.images]
     assert np.nanmax(panels[2].images[0].get_array()) == np.sqrt(2) / 2  # |predicted - observed|
+    assert panels[0].get_xlabel() == "column [px]" and panels[0].images[0].get_extent() == [0, 24, 32, 0]
+    assert "grey: no ray" in fig._suptitle.get_text()
     u_true = np.zeros((2, 8, 6, 2))
     u_true[1, 6, 2] = 1.0
     rec = SimpleNamespace(reference=np.zeros((2, 64, 48), np.uint8), distorted=np.zeros((2, 64, 48), np.uint8),

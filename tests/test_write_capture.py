@@ -15,8 +15,18 @@ SMALL = ["rig.width_px=240", "rig.height_px=320", "rig.binning=8", "rig.n_camera
 
 def test_the_rig_file_describes_the_cameras_that_took_the_images(tmp_path, capsys):
     root = main([str(tmp_path / "cap"), *SMALL])
-    assert "python -m nerif data=capture data.root=" in capsys.readouterr().out
+    assert f"python -m nerif data=capture data.root={root} data.truth={root / 'volume.npz'}" in capsys.readouterr().out
     rig = read_rig(root)
+    # issue 50: the truth it was rendered from, as the shared captures hold it, read back as data.truth reads it
+    from nerif.data.folders import read_truth
+    from nerif.physics import Ambient
+
+    truth = np.load(root / "volume.npz")
+    T = read_truth(root / "volume.npz", rig.box)
+    amb = Ambient(float(truth["T0"]), float(truth["n0"]), 2000.0)
+    assert T.shape == (16, 16, 16) and abs(T.min() - amb.T0) < 1.0 and T.max() > 1000.0
+    np.testing.assert_allclose(truth["sigma"], amb.sigma_from_temperature(T), rtol=1e-6)
+    assert float(truth["delta_thre"]) == amb.delta_thre and float(truth["voxel_mm"]) == 2.0
     lens = rig.lens
     assert rig.sensor_px == (240, 320) and lens.focal_mm == 105.0 and lens.f_number == 16.0
     assert lens.pitch_um == pytest.approx(20.0)  # images on the full sensor
@@ -40,6 +50,8 @@ def test_a_time_series_is_written_frame_by_frame(tmp_path, capsys):
     root = main([str(tmp_path / "series"), *over])
     assert "capture of 2 frames of 3 views" in capsys.readouterr().out
     rig = read_rig(root)
+    first, second = (np.load(root / f"frame_{k:04d}" / "volume.npz")["T"] for k in (0, 1))
+    assert first.shape == (16, 16, 16) and np.abs(first - second).max() > 0  # each frame's own truth
     assert [f.time_s for f in rig.frames] == pytest.approx([0.0, 1 / 24])
     assert rig.frames[1].images == tuple(f"frame_0001/distorted_{v:02d}.png" for v in range(3))
     d0, refs = capture_files(rig, 0)
@@ -65,10 +77,11 @@ def test_an_existing_folder_or_a_file_is_refused_and_overwrite_replaces_it_whole
     assert {p.name: p.read_bytes() for p in root.iterdir()} == before
     with pytest.raises(SystemExit):
         main([str(tmp_path / "typo"), *SMALL, "rig.n_camera=2"])
-    assert "rig.n_camera" in capsys.readouterr().err and not (tmp_path / "typo").exists()
+    assert "rig.n_camera: not a setting nerif knows (did you mean rig.n_cameras?)" in capsys.readouterr().err
+    assert not (tmp_path / "typo").exists()
     main([str(root), "--overwrite", *SMALL, "rig.n_cameras=2"])  # issue 38: --overwrite anywhere on the line
     assert sorted(p.name for p in root.iterdir()) == ["distorted_00.png", "distorted_01.png", "reference_00.png",
-                                                      "reference_01.png", RIG_FILE]
+                                                      "reference_01.png", RIG_FILE, "volume.npz"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cap", "file"]  # no staging folder left
 
 

@@ -208,6 +208,8 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
     causes = [m.left_out for m in measured]
     scene = scene_from_displacements(rig.box, rig.ambient, cameras, [m.displacement for m in measured],
                                      [m.valid for m in measured], device=device, rays=rays, sigma_prior=prior,
+                                     sigma_prior_from=f"temperature_range_K {list(rig.temperature_range_K or ())} in "
+                                                      f"{rig.path}",
                                      images=views, truth_T=truth_T, found=found_per_view(measured),
                                      left_out=causes if all(c is not None for c in causes) else None)
     return screened(scene, held)

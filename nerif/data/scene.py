@@ -112,6 +112,8 @@ class Scene:
             (:class:`nerif.sensing.record.SensingRecord`), else None.
         heldout: the views kept out of training, as a scene of their own (same box and ambient), else None.
         sigma_prior: (a, b) interval of sigma the data say the field lies in, else None (the field's default).
+        sigma_prior_from: the setting that gave ``sigma_prior``, as a user would edit it (a rig file's
+            ``temperature_range_K``, ``data.sigma_prior``).
         displacements: (N, 2) the image displacements measured for each ray [px of the full sensor] where the data
             were measured as displacements (captures, realistic sensing), else None (:attr:`displacement_px`
             derives them).
@@ -134,6 +136,7 @@ class Scene:
     perpendicular_only: bool = False
     heldout: Optional["Scene"] = None
     sigma_prior: Optional[tuple] = None
+    sigma_prior_from: Optional[str] = None
     displacements: Optional[torch.Tensor] = None
     observed: torch.Tensor = field(init=False, repr=False)
 

@@ -160,7 +160,8 @@ def transforms(root: str, probe: dict, T0: float, n0: float, *, sigma_prior: Opt
         truth_T = read_truth(truth, box)
     cams = optics(pitch_um, focal_mm, f_number, background_mm)
     scene = load_views(root, "train", box, ambient, cams, binning, device, truth_T=truth_T,
-                       sigma_prior=tuple(float(x) for x in sigma_prior) if sigma_prior is not None else None)
+                       sigma_prior=tuple(float(x) for x in sigma_prior) if sigma_prior is not None else None,
+                       sigma_prior_from="data.sigma_prior")
     if heldout_views is not None:
         if heldout_split:
             raise ValueError("data.heldout_views holds out training views: set data.heldout_split=null with it")

@@ -9,7 +9,8 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Optional
+from xml.sax.saxutils import escape
 
 import numpy as np
 import torch
@@ -88,7 +89,12 @@ def write_json(obj: dict, path: Path) -> Path:
     return atomic_write(path, write)
 
 
-def write_npz(path: Path, **arrays) -> Path:
+def write_npz(path: Path, units: Optional[dict] = None, **arrays) -> Path:
+    """``arrays`` as a compressed ``.npz``, atomically; ``units`` (name -> unit) as its ``units`` entry, a JSON
+    string (``json.loads(str(np.load(path)["units"]))``)."""
+    if units:
+        arrays["units"] = np.array(json.dumps({k: units[k] for k in arrays if k in units}))
+
     def write(tmp):
         with open(tmp, "wb") as f:
             np.savez_compressed(f, **arrays)
@@ -96,19 +102,29 @@ def write_npz(path: Path, **arrays) -> Path:
     return atomic_write(path, write)
 
 
-def write_vti(path: Path, voxel_mm: float, origin_mm, **volumes: np.ndarray) -> Path:
-    """VTK XML ImageData (ParaView): point data on the voxel centres, x fastest; lengths in mm."""
+def write_vti(path: Path, voxel_mm: float, origin_mm, units: Optional[dict] = None, **volumes: np.ndarray) -> Path:
+    """VTK XML ImageData (ParaView): point data on the voxel centres, x fastest; lengths in mm. ``units``: array
+    name -> unit, written as the field data ``units`` (strings ``"NAME: UNIT"``, one an array; ParaView shows them
+    under Information) and as ``units`` on each array."""
     shape = next(iter(volumes.values())).shape
+    units = units or {}
     arrays = []
     for name, vol in volumes.items():
         raw = np.asarray(vol, dtype="<f4").ravel(order="F").tobytes()
         payload = base64.b64encode(np.uint32(len(raw)).tobytes() + raw).decode()
-        arrays.append(f'<DataArray type="Float32" Name="{name}" format="binary">{payload}</DataArray>')
+        unit = f' units="{escape(units[name], {chr(34): "&quot;"})}"' if name in units else ""
+        arrays.append(f'<DataArray type="Float32" Name="{name}"{unit} format="binary">{payload}</DataArray>')
+    field = ""
+    if units:
+        words = [f"{k}: {units[k]}" for k in volumes if k in units] + ["lengths: mm"]
+        codes = " ".join(" ".join(map(str, w.encode("utf-8") + b"\0")) for w in words)
+        field = (f'<FieldData>\n<Array type="String" Name="units" NumberOfTuples="{len(words)}" format="ascii">'
+                 f"{codes}</Array>\n</FieldData>\n")
     extent = " ".join(f"0 {n - 1}" for n in shape)
     text = (
         '<?xml version="1.0"?>\n<VTKFile type="ImageData" version="0.1" byte_order="LittleEndian" header_type="UInt32">\n'
         f'<ImageData WholeExtent="{extent}" Origin="{" ".join(map(str, origin_mm))}" '
-        f'Spacing="{voxel_mm} {voxel_mm} {voxel_mm}">\n<Piece Extent="{extent}">\n'
+        f'Spacing="{voxel_mm} {voxel_mm} {voxel_mm}">\n{field}<Piece Extent="{extent}">\n'
         f'<PointData Scalars="{next(iter(volumes))}">\n' + "\n".join(arrays) + "\n</PointData>\n</Piece>\n"
         "</ImageData>\n</VTKFile>\n"
     )

@@ -15,9 +15,10 @@ import numpy as np
 import torch
 
 from nerif.io.export import write_npz, write_png, write_vti
+from nerif.io.units import VOLUMES
 from nerif.metrics import temperature_figures, uncertainty_scores
-from nerif.io.plots import (curves_figure, heldout_figure, measured_figure, profiles_figure, save_figure,
-                             sensing_figure, slice_figure)
+from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, profiles_figure,
+                             save_figure, sensing_figure, slice_figure)
 
 log = logging.getLogger(__name__)
 # the files every run writes (held-out figures, masks and sensing pictures beside them where there are any)
@@ -25,13 +26,22 @@ RESULTS = ("reconstruction.npz", "reconstruction.vti", "slices.png", "profiles.p
 
 
 def write_masks(masks, scene, out_dir: Path) -> None:
-    """2-D masks as PNGs (one per view) and the 3-D mask as a volume."""
+    """2-D masks as PNGs (one per view, 255 inside), ``masks/masks2d.png`` (every view's mask over its measured
+    deflections), and the 3-D mask as a volume."""
     for v, img in enumerate(masks.images or []):
         write_png(out_dir / "masks" / f"mask2d_view{v:02d}.png", img.astype(np.uint8) * 255)
+    if masks.images:
+        eps = scene.eps.detach().cpu().double().numpy()
+        values = [scene.view_image(v, np.linalg.norm(eps[scene.view_slice(v)], axis=-1), np.nan)
+                  for v in range(scene.n_views)]
+        save_figure(masks_figure(values, list(masks.images), [c.name for c in scene.cameras],
+                                 "rad" if scene.ambient.temperature_known else "sigma", scene.cameras[0].binning),
+                    out_dir / "masks" / "masks2d.png")
     if masks.volume is not None:
         origin = [float(a[0]) for a in scene.box.axes()]
-        write_npz(out_dir / "mask3d.npz", mask=masks.volume, voxel_mm=scene.box.voxel_mm, origin_mm=np.asarray(origin))
-        write_vti(out_dir / "mask3d.vti", scene.box.voxel_mm, origin, mask=masks.volume.astype(np.float32))
+        write_npz(out_dir / "mask3d.npz", units=VOLUMES, mask=masks.volume, voxel_mm=scene.box.voxel_mm,
+                  origin_mm=np.asarray(origin))
+        write_vti(out_dir / "mask3d.vti", scene.box.voxel_mm, origin, units=VOLUMES, mask=masks.volume.astype(np.float32))
 
 
 def write_sensing(scene, out_dir: Path, causes: tuple = ()) -> None:
@@ -110,7 +120,7 @@ def write_heldout(solver, out_dir: Path) -> dict:
     unit = "px" if ev.physical else "sigma"
     for v, (obs, predicted) in enumerate(ev.heldout_images(pred)):
         cam = ev.scene.heldout.cameras[v]
-        save_figure(heldout_figure(obs, predicted, unit=unit, title=f"held out: {cam.name}"),
+        save_figure(heldout_figure(obs, predicted, unit=unit, title=f"held out: {cam.name}", block_px=cam.binning),
                     out_dir / "heldout" / f"{camera_file(cam.name)}.png")
     return ev.heldout_errors(solver.predict, every=True, pred=pred)
 
@@ -151,15 +161,15 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float)
     if scene.truth_T is not None:
         vols["T_true"] = scene.truth_T
     origin = [float(a[0]) for a in box.axes()]
-    write_npz(out_dir / "reconstruction.npz", voxel_mm=box.voxel_mm, origin_mm=np.asarray(origin), T0=amb.T0, n0=amb.n0,
-              delta_thre=amb.delta_thre, **vols)
-    write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, **vols)
+    write_npz(out_dir / "reconstruction.npz", units=VOLUMES, voxel_mm=box.voxel_mm, origin_mm=np.asarray(origin),
+              T0=amb.T0, n0=amb.n0, delta_thre=amb.delta_thre, **vols)
+    write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, units=VOLUMES, **vols)
     label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
     title = f"{label}, {solver.iteration} iterations"
     save_figure(volume_slices(sigma, scene, title, vols.get("sigma_std")), out_dir / "slices.png")
     save_figure(volume_slices(sigma, scene, title, vols.get("sigma_std"), profiles_figure), out_dir / "profiles.png")
-    save_figure(curves_figure(solver.history, losses, solver.report.get("images_from_iteration")),
-                out_dir / "curves.png")
+    save_figure(curves_figure(solver.history, losses, solver.report.get("images_from_iteration"),
+                              "rad" if amb.temperature_known else "sigma"), out_dir / "curves.png")
     final = dict(solver.history[-1]) if solver.history else solver.evaluate()
     final.pop("iteration", None)
     failed = ""

@@ -23,6 +23,7 @@ def extent(box: ProbeBox, vertical: int) -> list[float]:
 # the heights of the horizontal slices and of the profiles across the axis: fractions of the probe box's height
 # from its bottom, the same for every run on the same box
 HEIGHTS = (0.25, 0.5, 0.75)
+ERROR = "error (reconstruction - truth)"  # red: too hot, blue: too cold
 
 
 def height_indices(box: ProbeBox) -> list[int]:
@@ -41,14 +42,14 @@ def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = No
     iz = box.shape[2] // 2
     _, ax_y, ax_z = box.axes()
     ext_xy, ext_xz = extent(box, 1), extent(box, 2)
-    cols = [("reconstruction", T)] + ([("truth", T_true), ("error", T - T_true)] if T_true is not None else [])
+    cols = [("reconstruction", T)] + ([("truth", T_true), (ERROR, T - T_true)] if T_true is not None else [])
     cols += [("uncertainty (1 std)", std)] if std is not None else []
     vmin, vmax = float(min(T.min(), ref.min())), float(max(T.max(), ref.max()))
     rows = [("x-y", None)] + [("x-z", iy) for iy in height_indices(box)]
     fig, axes = plt.subplots(len(rows), len(cols), figsize=(3.6 * len(cols), 3.4 * len(rows)), squeeze=False)
     for j, (name, vol) in enumerate(cols):
         lim = float(np.abs(vol).max()) or 1.0
-        kw = {"error": dict(cmap="RdBu_r", vmin=-lim, vmax=lim), "uncertainty (1 std)": dict(cmap="viridis", vmin=0,
+        kw = {ERROR: dict(cmap="RdBu_r", vmin=-lim, vmax=lim), "uncertainty (1 std)": dict(cmap="viridis", vmin=0,
               vmax=lim)}.get(name, dict(cmap="inferno", vmin=vmin, vmax=vmax))
         for i, (plane, iy) in enumerate(rows):
             ax = axes[i, j]
@@ -70,15 +71,22 @@ def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = No
 
 def profiles_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = None, title: str = "",
                     unit: str = "K", std: Optional[np.ndarray] = None):
-    """Temperature along the burner axis (x = z = 0, against y) and across it (along x at z = 0) at the heights
-    :data:`HEIGHTS`, of the reconstruction ``T`` (nx, ny, nz) [``unit``] (with one standard deviation shaded where
+    """Temperature along the burner axis (x = z = 0, against y), up the column of the hottest voxel where that is
+    off the axis, and across the axis (along x at z = 0) at the heights :data:`HEIGHTS`, of the reconstruction ``T`` (nx, ny, nz) [``unit``] (with one standard deviation shaded where
     ``std`` is given) and of the truth where known (dashed). Lengths in mm. Returns a figure."""
-    ax_x, ax_y, _ = box.axes()
+    ax_x, ax_y, ax_z = box.axes()
     ix, iz = box.shape[0] // 2, box.shape[2] // 2  # the voxel column nearest the axis
+    ref = T_true if T_true is not None else T
+    px, _, pz = np.unravel_index(np.argmax(ref), ref.shape)  # the column of the hottest voxel (the truth's if known)
     heights = height_indices(box)
-    fig, axes = plt.subplots(1, 1 + len(heights), figsize=(4.2 * (1 + len(heights)), 4.2), squeeze=False)
-    lines = [(ax_y, T[ix, :, iz], None if std is None else std[ix, :, iz],
-              None if T_true is None else T_true[ix, :, iz], "along the burner axis (x = z = 0)", "y [mm]")]
+    columns = [((ix, iz), "along the burner axis (x = z = 0)")]
+    if (px, pz) != (ix, iz):
+        columns.append(((px, pz), f"vertical through the {'true ' if T_true is not None else ''}peak "
+                                  f"(x = {ax_x[px]:.1f}, z = {ax_z[pz]:.1f} mm)"))
+    fig, axes = plt.subplots(1, len(columns) + len(heights), figsize=(4.2 * (len(columns) + len(heights)), 4.2),
+                             squeeze=False)
+    lines = [(ax_y, T[i, :, k], None if std is None else std[i, :, k], None if T_true is None else T_true[i, :, k],
+              name, "y [mm]") for (i, k), name in columns]
     lines += [(ax_x, T[:, iy, iz], None if std is None else std[:, iy, iz],
                None if T_true is None else T_true[:, iy, iz], f"across, y = {ax_y[iy]:.1f} mm (z = 0)", "x [mm]")
               for iy in heights]
@@ -137,11 +145,18 @@ def save_figure(fig, path: Path) -> Path:
 TERM_NAMES = {"loss": "total", "loss_boundary": "ambient faces (sigma = 0)", "loss_tv": "total variation"}
 
 
-def curves_figure(history: list[dict], losses: list[tuple[int, dict]], images_from: Optional[int] = None):
+# the evaluation figure curves.png follows, with its axis label
+EVALUATED = {"temperature_rmse_K": "T RMSE over the probe box [K]",
+             "deflection_rmse": "deflection RMSE on training rays [{unit}]"}
+
+
+def curves_figure(history: list[dict], losses: list[tuple[int, dict]], images_from: Optional[int] = None,
+                  deflection_unit: str = "rad"):
     """Each term of the training loss against iteration (``losses``: (iteration, the step's terms), as the solver
     names them), the switch from the flow's deflections to the images marked at ``images_from``; and the
-    evaluation errors against wall time. The data term is normalised by what it compares (the deflections' or the
-    images' mean square), so its level changes where the fit switches from one to the other."""
+    evaluation errors against wall time (the temperature's RMSE where a truth is known, else the deflections', in
+    ``deflection_unit``). The data term is normalised by what it compares (the deflections' or the images' mean
+    square), so its level changes where the fit switches from one to the other."""
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.4))
     if losses:
         it = np.array([i for i, _ in losses])
@@ -149,26 +164,35 @@ def curves_figure(history: list[dict], losses: list[tuple[int, dict]], images_fr
         for k in names:
             v = np.array([t.get(k, np.nan) for _, t in losses], dtype=float)
             label = TERM_NAMES.get(k, f"data term ({k[5:]} gradients)")
-            if k == "loss":
-                a.semilogy(it, v, color="k", lw=1.6, alpha=0.35, label=label)
+            if k == "loss":  # on top, dashed: where the sum is the data term alone the two lines lie on each other
+                a.semilogy(it, v, color="k", lw=1.2, ls="--", zorder=3, label=label + " (sum of the terms)")
             elif k in TERM_NAMES or images_from is None:
-                a.semilogy(it, v, lw=0.8, label=label + ("" if k in TERM_NAMES else ": flow deflections"))
+                a.semilogy(it, v, lw=1.6, label=label + ("" if k in TERM_NAMES else ": flow deflections"))
             else:  # the data term: the flow's deflections, then the images with the flow term beside them
                 flow, images = it < images_from, it >= images_from
-                a.semilogy(it[flow], v[flow], lw=0.8, label=f"{label}: flow deflections")
-                a.semilogy(it[images], v[images], lw=0.8, label=f"{label}: images + flow")
+                a.semilogy(it[flow], v[flow], lw=1.6, label=f"{label}: flow deflections")
+                a.semilogy(it[images], v[images], lw=1.6, label=f"{label}: images + flow")
         if images_from is not None and it[0] <= images_from <= it[-1]:
             a.axvline(images_from, color="0.4", ls="--", lw=0.8)
             a.annotate("flow -> images", (images_from, 0), xycoords=("data", "axes fraction"), xytext=(3, 4),
                        textcoords="offset points", fontsize=7, color="0.3")
         a.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
     a.set_xlabel("iteration")
-    a.set_ylabel("training loss terms (normalised)")
-    key = "temperature_rmse_K" if history and "temperature_rmse_K" in history[0] else "deflection_rmse"
+    a.set_ylabel("training loss terms (normalised, 1)")
+    a.set_title("training loss", fontsize=9)
+    key = "temperature_rmse_K" if history and history[0].get("temperature_rmse_K") is not None else "deflection_rmse"
     if history:
-        b.plot([h["wall_time_s"] for h in history], [h[key] for h in history], "o-", ms=3)
+        t, y = [h["wall_time_s"] for h in history], [h[key] for h in history]
+        b.plot(t, y, "o-", ms=4)
+        if len(history) < 3:  # too few evaluations for a curve: say what they were
+            for ti, yi, h in zip(t, y, history):
+                b.annotate(f"{yi:.3g} at iteration {h.get('iteration', '?')}", (ti, yi), xytext=(4, 4),
+                           textcoords="offset points", fontsize=7)
+            b.text(0.02, 0.02, "few evaluations: train.eval_every sets how often", transform=b.transAxes,
+                   fontsize=7, color="0.3")
     b.set_xlabel("training wall time [s]")
-    b.set_ylabel(key)
+    b.set_ylabel(EVALUATED[key].format(unit=deflection_unit))
+    b.set_title("error during training (fixed evaluation rays)", fontsize=9)
     fig.tight_layout()
     return fig
 
@@ -188,21 +212,68 @@ def image_panels(panels: list, title: str, width_in: float = 3.2, height_in: flo
     return fig
 
 
-def heldout_figure(observed: np.ndarray, predicted: np.ndarray, unit: str, title: str = ""):
-    """One held-out view: observed and predicted magnitude, and the magnitude of their difference.
+HOLES = "grey: no ray (left out by the measurement, outside the region or the view's box, or masked)"
+
+
+def heldout_figure(observed: np.ndarray, predicted: np.ndarray, unit: str, title: str = "", block_px: int = 1):
+    """One held-out view: observed and predicted magnitude, and the magnitude of their difference, on the view's
+    pixels (axes in pixels of the full sensor), grey where the view has no ray (:data:`HOLES`).
 
     Args:
-        observed, predicted: (h, w, C) vectors on the camera's pixel grid, NaN where there is no ray.
+        observed, predicted: (h, w, C) vectors on the camera's ray grid, NaN where there is no ray.
         unit: of the vectors (px for displacements, rad or sigma for deflections).
+        block_px: sensor pixels across a ray (the ray grid's binning).
     """
     mag_o, mag_p = np.linalg.norm(observed, axis=-1), np.linalg.norm(predicted, axis=-1)
     diff = np.linalg.norm(predicted - observed, axis=-1)
     vmax = float(np.nanmax(mag_o)) if np.isfinite(mag_o).any() else 1.0
     dmax = float(np.nanmax(diff)) if np.isfinite(diff).any() else 1.0
-    panels = [(f"observed [{unit}]", mag_o, dict(cmap="viridis", vmin=0, vmax=vmax or 1.0)),
-              (f"predicted [{unit}]", mag_p, dict(cmap="viridis", vmin=0, vmax=vmax or 1.0)),
+    h, w = mag_o.shape
+    what = "displacement" if unit == "px" else "deflection"
+    panels = [(f"observed |{what}| [{unit}]", mag_o, dict(cmap="viridis", vmin=0, vmax=vmax or 1.0)),
+              (f"predicted |{what}| [{unit}]", mag_p, dict(cmap="viridis", vmin=0, vmax=vmax or 1.0)),
               (f"|predicted - observed| [{unit}]", diff, dict(cmap="magma", vmin=0, vmax=dmax or 1.0))]
-    return image_panels(panels, title, 3.5, 5.2)
+    fig, axes = plt.subplots(1, 3, figsize=(11.5, 3.2 * h / max(w, 1) + 1.6), squeeze=False)
+    for ax, (name, img, kw) in zip(axes[0], panels):
+        im = ax.imshow(img, extent=(0, w * block_px, h * block_px, 0), interpolation="nearest", **kw)
+        ax.set_facecolor("#b0b0b0")
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel("column [px]")
+        ax.set_ylabel("row [px]")
+        fig.colorbar(im, ax=ax, fraction=0.046, label=f"[{unit}]")
+    fig.suptitle(f"{title}\n{HOLES}" if title else HOLES, fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def masks_figure(values: list, masks: list, names: list, unit: str, block_px: int = 1):
+    """Every view's 2-D mask over what it was made from: per view (``values``: (h, w) the magnitude of each ray's
+    measured deflection [``unit``], NaN where the view has no ray; ``masks``: (h, w) bool, the rays trained on),
+    the magnitude with the mask's edge drawn in white; axes in pixels of the full sensor (``block_px`` across a
+    ray). Returns a figure."""
+    n = len(values)
+    cols = min(n, 6)
+    rows = -(-n // cols)
+    h, w = values[0].shape
+    fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 2.6 * rows * h / max(w, 1) + 0.9), squeeze=False)
+    vmax = max((float(np.nanpercentile(v, 99.5)) for v in values if np.isfinite(v).any()), default=1.0) or 1.0
+    for ax in axes.ravel()[n:]:
+        ax.axis("off")
+    for ax, val, mask, name in zip(axes.ravel(), values, masks, names):
+        ext = (0, val.shape[1] * block_px, val.shape[0] * block_px, 0)
+        im = ax.imshow(val, extent=ext, cmap="viridis", vmin=0, vmax=vmax, interpolation="nearest")
+        ax.set_facecolor("#b0b0b0")
+        if mask.any() and not mask.all():
+            ax.contour(mask.astype(float), levels=[0.5], colors="w", linewidths=0.8, origin="upper", extent=ext)
+        ax.set_title(f"{name}: {100 * float(np.mean(mask)):.0f} % inside", fontsize=7)
+        ax.tick_params(labelsize=6)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("row [px]", fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("column [px]", fontsize=7)
+    fig.colorbar(im, ax=axes.ravel().tolist(), fraction=0.02, label=f"|measured deflection| [{unit}]")
+    fig.suptitle("2-D masks: training rays are drawn inside the white lines (grey: no ray)", fontsize=9)
+    return fig
 
 
 def sensing_figure(record, view: int, crop_px: int = 160, title: str = ""):

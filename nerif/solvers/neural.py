@@ -15,7 +15,7 @@ from nerif.data import Scene
 from nerif.encoders import ENCODERS
 from nerif.data.phantoms import read_volume
 from nerif.field import (NeuralField, averaged_field, check_truth_within, fit_to_volume, prior_interval,
-                         prior_saturation)
+                         prior_saturation, prior_source)
 from nerif.losses import AmbientBoundary, TotalVariation, weighted_sum
 from nerif.renderers import SAMPLERS, render_deflections
 from nerif.renderers.samplers import UniformSampler
@@ -107,7 +107,8 @@ class NeuralSolver(IterativeSolver):
         draws from (``masks.inside``)."""
         super().setup(scene, masks)
         self.interval = prior = prior_interval(self.prior, scene.sigma_prior)  # the field's sigma bounds (a, b)
-        check_truth_within(scene.truth_T, scene.ambient, prior)
+        self.prior_source = prior_source(self.prior, scene.sigma_prior_from if scene.sigma_prior else None)
+        check_truth_within(scene.truth_T, scene.ambient, prior, self.prior_source)
         self.field = NeuralField(self.encoder, scene.box, hidden=self.hidden, prior=prior, gate=masks.gate)
         self.field.to(self.device)
         self.sampler.to(self.device)
@@ -292,7 +293,7 @@ class NeuralSolver(IterativeSolver):
     def saturation(self, sigma: np.ndarray, failed: str = "") -> dict:
         """:func:`nerif.field.prior_saturation` of ``sigma`` within this field's prior (``failed``: the held-out
         views' sentence where they say the fit failed)."""
-        return prior_saturation(sigma, self.interval, self.scene.ambient, self.scene.truth_T, failed)
+        return prior_saturation(sigma, self.interval, self.scene.ambient, self.scene.truth_T, failed, self.prior_source)
 
     # --- batches ---
     def _measured(self, d: torch.Tensor) -> Optional[torch.Tensor]:
