@@ -151,7 +151,7 @@ def unknown_override(args: Sequence[str]) -> Optional[str]:
         return None
     root = config_dir()
     groups = {p.name for p in root.iterdir() if p.is_dir() and p.name != "hydra"}
-    settings = []
+    settings, choices = [], []
     for o in parsed:
         key = o.key_or_group
         if key.startswith("hydra") or o.is_delete():
@@ -159,6 +159,7 @@ def unknown_override(args: Sequence[str]) -> Optional[str]:
         if key in groups:
             options = {p.stem for p in (root / key).glob("*.yaml")}
             values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [o.get_value_element_as_str()]
+            choices.append(f"{'+' if o.is_add() else ''}{key}={values[0]}")  # a sweep's first: its keys are alike
             for value in values:
                 if value not in options:
                     near = nearest(value, options)
@@ -169,12 +170,12 @@ def unknown_override(args: Sequence[str]) -> Optional[str]:
             settings.append(key)
     if not settings:
         return None
-    cfg = compose(group_choices([a for a in args if "=" in a and not a.startswith("-")]))
+    cfg = compose(choices)
     for key in settings:
         node, path = cfg, []
         parts = key.split(".")
         for i, part in enumerate(parts):
-            if not isinstance(node, DictConfig) or part not in node:
+            if not isinstance(node, DictConfig) or part not in node.keys():  # `in` is False for a value left ???
                 known = list(node.keys()) if isinstance(node, DictConfig) else []
                 where = ".".join(path)
                 near = nearest(part, [k for k in known if k != "hydra"])
@@ -183,5 +184,5 @@ def unknown_override(args: Sequence[str]) -> Optional[str]:
                     f"; {where or 'the top level'} has {', '.join(str(k) for k in known if k != 'hydra')}"
                     if known else "")
                 return f"{key}: not a setting nerif knows{hint}"
-            node, path = node[part], path + [part]
+            node, path = None if OmegaConf.is_missing(node, part) else node[part], path + [part]  # ???: a leaf
     return None
