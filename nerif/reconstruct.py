@@ -18,7 +18,6 @@ from nerif.data import DATASETS
 from nerif.data.scene import hot_evidence, view_directions, view_span_deg
 from nerif.io.export import write_json
 from nerif.io.outputs import RESULTS, summary_line, volume_slices, write_masks, write_outputs, write_sensing
-from nerif.io.plots import profiles_figure
 from nerif.io.units import metric_units
 from nerif.masks import MASKS
 from nerif.sensing.measurement import CAUSES
@@ -142,7 +141,7 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
         for k, v in m.items():
             if k != "iteration" and isinstance(v, (int, float)):  # None: not defined here (no flame)
                 writer.add_scalar(f"eval/{k}", v, it)
-        if it % tc.image_every == 0 or it == solver.iterations:
+        if it % tc.image_every == 0 and it < solver.iterations:  # the final state's: written with the results
             writer.add_figure("slices", volume_slices(solver.reconstruction(), scene, f"iteration {it}"), it)
         writer.flush()
 
@@ -158,16 +157,19 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
             log.warning("%s while estimating the uncertainty: the results are written without it", received[0])
         solver.added.update(estimated.get("volumes", {}))
         solver.report.update(estimated.get("report", {}))
-        if "sigma_std" in solver.added:
-            writer.add_figure("uncertainty", volume_slices(solver.reconstruction(), scene, "uncertainty",
-                                                           solver.added["sigma_std"]), solver.iteration)
-        writer.add_figure("profiles", volume_slices(solver.reconstruction(), scene, f"iteration {solver.iteration}",
-                                                    solver.added.get("sigma_std"), profiles_figure), solver.iteration)
-    finally:
+    except BaseException:
         writer.close()
+        raise
 
     try:
-        metrics = write_outputs(solver, scene, out_dir, losses, flame_above_K=cfg.metrics.flame_above_K)
+        def show(name: str, fig) -> None:  # the final slices and profiles in TensorBoard too, drawn once
+            writer.add_figure(name, fig, solver.iteration, close=False)
+
+        try:
+            metrics = write_outputs(solver, scene, out_dir, losses, flame_above_K=cfg.metrics.flame_above_K,
+                                    show=show)
+        finally:
+            writer.close()
         about = dict(about or {})
         earlier = about.pop("warnings", [])
         said = earlier + rig_warnings + metrics.get("warnings", []) + records.messages

@@ -18,7 +18,7 @@ def test_slices_show_the_central_xy_plane_and_fixed_heights_with_the_error(tmp_p
     fig = slice_figure(rec, BOX, truth, "test")
     axes = [a for a in fig.axes if a.images]  # the panels, without their colour bars
     assert [a.get_title() for a in axes[:3]] == ["reconstruction [K], z = 1.0 mm", "truth [K], z = 1.0 mm",
-                                                 "error (reconstruction - truth) [K], z = 1.0 mm"]
+                                                 "error (rec. - truth) [K], z = 1.0 mm"]
     # horizontal slices at a quarter, half and three quarters of the box's height (y indices 2, 4, 6 of 8),
     # whatever the field: two runs on the same box show the same planes
     assert [a.get_title() for a in axes[3::3]] == [f"reconstruction [K], y = {y:.1f} mm" for y in (-3.0, 1.0, 5.0)]

@@ -148,9 +148,10 @@ def failed_fit(m: dict) -> str:
     return ""
 
 
-def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float) -> dict:
+def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float, show=None) -> dict:
     """Volumes (.npz, .vti), slice, profile and curve PNGs, held-out figures, and the metrics of the final state
-    (the flame's volume: where T is above ``flame_above_K`` [K])."""
+    (the flame's volume: where T is above ``flame_above_K`` [K]); ``show(name, figure)``, where given, is shown the
+    slices and profiles before they are saved (TensorBoard)."""
     amb, box = scene.ambient, scene.box
     vols = dict(solver.volumes())
     sigma = vols["sigma"]
@@ -166,8 +167,11 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float)
     write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, units=VOLUMES, **vols)
     label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
     title = f"{label}, {solver.iteration} iterations"
-    save_figure(volume_slices(sigma, scene, title, vols.get("sigma_std")), out_dir / "slices.png")
-    save_figure(volume_slices(sigma, scene, title, vols.get("sigma_std"), profiles_figure), out_dir / "profiles.png")
+    for name, figure in (("slices", slice_figure), ("profiles", profiles_figure)):
+        fig = volume_slices(sigma, scene, title, vols.get("sigma_std"), figure)
+        if show is not None:
+            show(name, fig)
+        save_figure(fig, out_dir / f"{name}.png")
     save_figure(curves_figure(solver.history, losses, solver.report.get("images_from_iteration"),
                               "rad" if amb.temperature_known else "sigma"), out_dir / "curves.png")
     final = dict(solver.history[-1]) if solver.history else solver.evaluate()

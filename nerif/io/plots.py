@@ -23,7 +23,7 @@ def extent(box: ProbeBox, vertical: int) -> list[float]:
 # the heights of the horizontal slices and of the profiles across the axis: fractions of the probe box's height
 # from its bottom, the same for every run on the same box
 HEIGHTS = (0.25, 0.5, 0.75)
-ERROR = "error (reconstruction - truth)"  # red: too hot, blue: too cold
+ERROR = "error (rec. - truth)"  # red: too hot, blue: too cold
 
 
 def height_indices(box: ProbeBox) -> list[int]:
@@ -46,7 +46,11 @@ def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = No
     cols += [("uncertainty (1 std)", std)] if std is not None else []
     vmin, vmax = float(min(T.min(), ref.min())), float(max(T.max(), ref.max()))
     rows = [("x-y", None)] + [("x-z", iy) for iy in height_indices(box)]
-    fig, axes = plt.subplots(len(rows), len(cols), figsize=(3.6 * len(cols), 3.4 * len(rows)), squeeze=False)
+    # one colour bar a column (its panels share the scale); fixed spacing: a tight layout of 4 x 4 panels costs a
+    # second a figure, in every run and every TensorBoard image
+    fig, axes = plt.subplots(len(rows), len(cols), figsize=(3.3 * len(cols) + 0.6, 3.1 * len(rows) + 0.5),
+                             squeeze=False, height_ratios=[box.extent_mm[1] / box.extent_mm[2]] + [1] * (len(rows) - 1))
+    fig.subplots_adjust(left=0.08, right=0.88, bottom=0.04, top=0.93, wspace=0.75, hspace=0.35)
     for j, (name, vol) in enumerate(cols):
         lim = float(np.abs(vol).max()) or 1.0
         kw = {ERROR: dict(cmap="RdBu_r", vmin=-lim, vmax=lim), "uncertainty (1 std)": dict(cmap="viridis", vmin=0,
@@ -55,17 +59,21 @@ def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = No
             ax = axes[i, j]
             img, ext = (vol[:, :, iz].T, ext_xy) if iy is None else (vol[:, iy, :].T, ext_xz)
             im = ax.imshow(img, origin="lower", extent=ext, **kw)
-            ax.set_xlabel("x [mm]")
-            ax.set_ylabel("y [mm] (burner axis)" if iy is None else "z [mm]")
+            ax.set_xlabel("x [mm]", fontsize=8, labelpad=1)
+            ax.set_ylabel("y [mm] (burner axis)" if iy is None else "z [mm]", fontsize=8, labelpad=1)
+            ax.tick_params(labelsize=7)
             where = f"z = {ax_z[iz]:.1f} mm" if iy is None else f"y = {ax_y[iy]:.1f} mm"
-            ax.set_title(f"{name} [{unit}], {where}", fontsize=9)
+            ax.set_title(f"{name} [{unit}], {where}", fontsize=8)
             if iy is None:
                 for k in height_indices(box):
                     ax.axhline(ax_y[k], color="w", lw=0.6, ls="--")
-            fig.colorbar(im, ax=ax, fraction=0.046, label=f"{name} [{unit}]")
+        top, bottom = axes[0, j].get_position(), axes[-1, j].get_position()
+        cax = fig.add_axes((top.x1 + 0.01, bottom.y0, 0.012, top.y1 - bottom.y0))
+        bar = fig.colorbar(im, cax=cax)
+        bar.set_label(f"{name} [{unit}]", fontsize=8)
+        bar.ax.tick_params(labelsize=7)
     if title:
         fig.suptitle(title + " (dashed: the heights of the horizontal slices)", fontsize=10)
-    fig.tight_layout()
     return fig
 
 
@@ -255,7 +263,8 @@ def masks_figure(values: list, masks: list, names: list, unit: str, block_px: in
     cols = min(n, 6)
     rows = -(-n // cols)
     h, w = values[0].shape
-    fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 2.6 * rows * h / max(w, 1) + 0.9), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 2.6 * rows * h / max(w, 1) + 0.9), squeeze=False,
+                             sharex=True, sharey=True)  # one grid for all: the tick labels on the edges only
     vmax = max((float(np.nanpercentile(v, 99.5)) for v in values if np.isfinite(v).any()), default=1.0) or 1.0
     for ax in axes.ravel()[n:]:
         ax.axis("off")
