@@ -114,7 +114,7 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
     rig_warnings = check_sign(scene, cfg.field.prior) + ill_posed(scene)
     tc = cfg.train
     write_masks(masks, scene, out_dir)
-    write_sensing(scene, out_dir, CAUSES)
+    write_sensing(scene, out_dir, CAUSES, cfg.data.get("cache_dir"))
     checkpoint = out_dir / "checkpoint.pt"
     resume = checkpoint_to_resume(tc.resume, checkpoint)
     if resume is not None:

@@ -544,3 +544,28 @@ def test_a_second_measurement_of_the_same_images_is_read_back_and_any_change_mea
     flows.clear()
     capture(root, FLOW, binning=8, cache_dir=cache)
     assert len(flows) == 1  # that view alone
+
+
+def test_a_measurements_picture_is_drawn_once_and_copied_by_the_next_run(written, tmp_path, monkeypatch):
+    """Issue 47: the pictures of a measurement (most of a second run's set-up once the measurement is cached) are
+    kept with it, keyed by what they show: the same measurement copies them, a changed view draws its own again."""
+    from dataclasses import replace
+
+    import nerif.io.outputs as outputs
+    from nerif.sensing.measurement import CAUSES
+
+    scene = capture(str(written[0]), FLOW, binning=8)
+    drawn = []
+    original = outputs.measured_figure
+    monkeypatch.setattr(outputs, "measured_figure", lambda *a, **k: drawn.append(a[-1]) or original(*a, **k))
+    views = scene.n_views + scene.heldout.n_views
+    outputs.write_sensing(scene, tmp_path / "a", CAUSES, tmp_path / "cache")
+    outputs.write_sensing(scene, tmp_path / "b", CAUSES, tmp_path / "cache")
+    assert len(drawn) == views
+    for a in sorted((tmp_path / "a" / "sensing").iterdir()):
+        assert a.read_bytes() == (tmp_path / "b" / "sensing" / a.name).read_bytes()
+    left_out = scene.views[0].left_out.copy()
+    left_out[0, 0] = 1  # one ray more left out in the first view
+    changed = replace(scene, views=[replace(scene.views[0], left_out=left_out), *scene.views[1:]])
+    outputs.write_sensing(changed, tmp_path / "c", CAUSES, tmp_path / "cache")
+    assert len(drawn) == views + 1 and drawn[-1].startswith(scene.cameras[0].name)

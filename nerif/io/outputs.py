@@ -14,11 +14,12 @@ from typing import Optional
 import numpy as np
 import torch
 
-from nerif.io.export import write_npz, write_png, write_vti
+from nerif.cache import cached_arrays, content_digest
+from nerif.io.export import atomic_write, write_npz, write_png, write_vti
 from nerif.io.units import VOLUMES
 from nerif.metrics import temperature_figures, uncertainty_scores
-from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, profiles_figure,
-                             save_figure, sensing_figure, slice_figure)
+from nerif.io.plots import (code_version, curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
+                             profiles_figure, save_figure, sensing_figure, slice_figure)
 
 log = logging.getLogger(__name__)
 # the files every run writes (held-out figures, masks and sensing pictures beside them where there are any)
@@ -44,21 +45,28 @@ def write_masks(masks, scene, out_dir: Path) -> None:
         write_vti(out_dir / "mask3d.vti", scene.box.voxel_mm, origin, units=VOLUMES, mask=masks.volume.astype(np.float32))
 
 
-def write_sensing(scene, out_dir: Path, causes: tuple = ()) -> None:
+def write_sensing(scene, out_dir: Path, causes: tuple = (), cache_dir=None) -> None:
     """Each measured view, training and held out: ``sensing/cameraNN_measured.png``, its reference with what the
     measurement stage left out coloured by cause (``causes``: the names of the stage's codes,
-    :data:`nerif.sensing.measurement.CAUSES`) and its displacement magnitude. Realistic sensing, per view: the
-    reference and distorted images (8-bit PNG, as a camera would save them) and a figure of images and
-    displacements."""
+    :data:`nerif.sensing.measurement.CAUSES`) and its displacement magnitude; kept in ``cache_dir`` (None: drawn
+    every time) keyed by what it shows, so that another run of the same measurement copies it. Realistic sensing,
+    per view: the reference and distorted images (8-bit PNG, as a camera would save them) and a figure of images
+    and displacements."""
     for s in (scene, scene.heldout):
         for view in (s.views if s is not None and causes else ()):
             if view.left_out is None or view.images is None:
                 continue
+            reference = view.images.reference.cpu().numpy()
             kept = 100 * float(np.mean(view.left_out == 0))
-            save_figure(measured_figure(view.images.reference.cpu().numpy(), view.measured_px, view.left_out, causes,
-                                        f"{view.camera.name}: the measurement kept {kept:.1f} % of its rays "
-                                        "(displacements in px of the full sensor)"),
-                        out_dir / "sensing" / f"{camera_file(view.camera.name)}_measured.png")
+            title = (f"{view.camera.name}: the measurement kept {kept:.1f} % of its rays (displacements in px of the "
+                     "full sensor)")
+            payload = {"picture": "measured", "title": title, "causes": list(causes), "code": code_version(),
+                       **{k: content_digest(np.asarray(a)) for k, a in (("reference", reference),
+                          ("displacement", view.measured_px), ("left_out", view.left_out))}}
+            png = cached_arrays(cache_dir, "picture", payload, lambda: {"png": np.frombuffer(png_bytes(
+                measured_figure(reference, view.measured_px, view.left_out, causes, title)), np.uint8)})["png"]
+            atomic_write(out_dir / "sensing" / f"{camera_file(view.camera.name)}_measured.png",
+                         lambda tmp: Path(tmp).write_bytes(png.tobytes()))
     rec = scene.sensing
     if rec is None:
         return
@@ -179,6 +187,8 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float,
     failed = ""
     if scene.heldout is not None:
         final.update(write_heldout(solver, out_dir))  # every held-out ray, not the evaluation subset
+        final["history_note"] = ("history follows the errors on a fixed subset of rays (metrics.eval_rays_per_view "
+                                 "per view); the final heldout_* figures use every held-out ray")
         final.update(heldout_explained(final))
         failed = failed_fit(final)
         if failed:

@@ -49,7 +49,7 @@ ENDINGS = (("_K", "K"), ("_px", "px"), ("_px_none", "px"), ("_px_per_view", "px"
            ("_mm", "mm"), ("_true_mm", "mm"), ("_cm3", "cm^3"), ("_db", "dB"), ("_gib", "GiB"))
 TEXT = ("solver", "encoder", "grad", "device", "data_term", "data_term_kept", "temperature_note", "deflection_unit",
         "warnings", "ambient_faces", "flame_crosses_faces", "projector", "regularizer", "uncertainty",
-        "uncertainty_scale_from", "note", "folder", "warm_start", "sampler", "mask", "error", "frame_folder")
+        "uncertainty_scale_from", "note", "history_note", "folder", "warm_start", "sampler", "mask", "error", "frame_folder")
 
 
 def unit_of(key: str) -> Optional[str]:
