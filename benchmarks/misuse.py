@@ -187,7 +187,7 @@ def cases(work: Path, fx: dict) -> list[Case]:
         Case("resume_other_scene", nerif(*TINY, "phantom.width_mm=9.0", f"train.resume={run / 'checkpoint.pt'}",
                                          out("resume_other")), "refuse", "made by another run", kept),
         Case("swapped_images", nerif(*cap(fx["swapped"]), out("swapped")), "refuse", "look swapped"),
-        *[Case(f"one_{k}", nerif(*cap(fx[k]), out(k)), "warn", "camera 1 (41.2 deg) is left out") for k in
+        *[Case(f"one_{k}", nerif(*cap(fx[k]), out(k)), "warn", "camera 01 (41.2 deg) is left out") for k in
           ("view_black", "view_saturated", "view_copy", "view_swapped")],
         Case("background_before_probe", nerif(*cap(fx["background_near"]), out("bg")), "refuse",
              "camera.camera_to_background_mm"),

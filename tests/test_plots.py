@@ -43,7 +43,8 @@ def test_profiles_follow_the_axis_and_cross_it_at_the_slices_heights(tmp_path):
     np.testing.assert_array_equal(true_line.get_ydata(), truth[3, :, 2])
     np.testing.assert_array_equal(rec_line.get_ydata(), truth[3, :, 2] + 20.0)
     assert axial.get_xlabel() == "y [mm]" and axial.get_ylabel() == "T [K]"
-    assert [a.get_title() for a in across] == [f"across, y = {y:.1f} mm (z = 0)" for y in (-3.0, 1.0, 5.0)]
+    assert [a.get_title() for a in across] == [f"across, y = {y:.1f} mm (z = 1.0 mm)" for y in (-3.0, 1.0, 5.0)]
+    assert axial.get_title() == "along the burner axis (x = 1.0, z = 1.0 mm)"  # the voxel column nearest the axis
     np.testing.assert_array_equal(across[0].get_lines()[0].get_ydata(), truth[:, 2, 2] + 20.0)
     on_axis = np.full(BOX.shape, 300.0)
     on_axis[3, 4, 2] = 1000.0

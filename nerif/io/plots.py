@@ -79,15 +79,16 @@ def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = No
 
 def profiles_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = None, title: str = "",
                     unit: str = "K", std: Optional[np.ndarray] = None):
-    """Temperature along the burner axis (x = z = 0, against y), up the column of the hottest voxel where that is
-    off the axis, and across the axis (along x at z = 0) at the heights :data:`HEIGHTS`, of the reconstruction ``T`` (nx, ny, nz) [``unit``] (with one standard deviation shaded where
+    """Temperature along the burner axis (the voxel column nearest x = z = 0, against y), up the column of the hottest
+    voxel where that is off the axis, and across the axis (along x, at the z of that column) at the heights
+    :data:`HEIGHTS`, of the reconstruction ``T`` (nx, ny, nz) [``unit``] (with one standard deviation shaded where
     ``std`` is given) and of the truth where known (dashed). Lengths in mm. Returns a figure."""
     ax_x, ax_y, ax_z = box.axes()
     ix, iz = box.shape[0] // 2, box.shape[2] // 2  # the voxel column nearest the axis
     ref = T_true if T_true is not None else T
     px, _, pz = np.unravel_index(np.argmax(ref), ref.shape)  # the column of the hottest voxel (the truth's if known)
     heights = height_indices(box)
-    columns = [((ix, iz), "along the burner axis (x = z = 0)")]
+    columns = [((ix, iz), f"along the burner axis (x = {ax_x[ix]:.1f}, z = {ax_z[iz]:.1f} mm)")]
     if (px, pz) != (ix, iz):
         columns.append(((px, pz), f"vertical through the {'true ' if T_true is not None else ''}peak "
                                   f"(x = {ax_x[px]:.1f}, z = {ax_z[pz]:.1f} mm)"))
@@ -96,7 +97,8 @@ def profiles_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] =
     lines = [(ax_y, T[i, :, k], None if std is None else std[i, :, k], None if T_true is None else T_true[i, :, k],
               name, "y [mm]") for (i, k), name in columns]
     lines += [(ax_x, T[:, iy, iz], None if std is None else std[:, iy, iz],
-               None if T_true is None else T_true[:, iy, iz], f"across, y = {ax_y[iy]:.1f} mm (z = 0)", "x [mm]")
+               None if T_true is None else T_true[:, iy, iz], f"across, y = {ax_y[iy]:.1f} mm (z = {ax_z[iz]:.1f} mm)",
+               "x [mm]")
               for iy in heights]
     lo = min(float(np.min(T)), float(np.min(T_true)) if T_true is not None else np.inf)
     hi = max(float(np.max(T)), float(np.max(T_true)) if T_true is not None else -np.inf)
