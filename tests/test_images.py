@@ -111,3 +111,21 @@ def test_cells_interpolate_a_linear_displacement_field_exactly_between_the_rays(
         assert bool(((x >= corners[0]) & (x < corners[3])).all())
         seen.append(x)
     assert torch.allclose(weights.sum(-1), torch.ones(b * b, dtype=torch.float64)) and len(offsets) == b * b
+
+
+def test_the_cached_photometric_scale_is_the_scale_to_the_last_bit_and_computed_once(tmp_path, monkeypatch):
+    """Issue 47: a second run on the same images reads each view's scale back; other images compute their own."""
+    import nerif.losses.images as images
+    from nerif.losses.images import cached_photometric_scale
+
+    g = torch.Generator().manual_seed(3)
+    ref = torch.rand((40, 30), generator=g, dtype=torch.float64)
+    gain = torch.eye(3, dtype=torch.float64)[:2].expand(10, 2, 3) * 2.0
+    direct = photometric_scale(ref, gain)
+    calls = []
+    original = images.photometric_scale
+    monkeypatch.setattr(images, "photometric_scale", lambda *a, **k: calls.append(1) or original(*a, **k))
+    assert cached_photometric_scale(ref, gain, cache_dir=tmp_path) == direct
+    assert cached_photometric_scale(ref, gain, cache_dir=tmp_path) == direct and len(calls) == 1
+    assert cached_photometric_scale(ref * 2, gain, cache_dir=tmp_path) == pytest.approx(4 * direct)
+    assert len(calls) == 2 and cached_photometric_scale(ref, gain) == direct and len(calls) == 3  # no cache: computed

@@ -114,6 +114,8 @@ class Scene:
         sigma_prior: (a, b) interval of sigma the data say the field lies in, else None (the field's default).
         sigma_prior_from: the setting that gave ``sigma_prior``, as a user would edit it (a rig file's
             ``temperature_range_K``, ``data.sigma_prior``).
+        cache_dir: where values derived from these data may be kept (``data.cache_dir``: the image term's
+            photometric scale), else None.
         displacements: (N, 2) the image displacements measured for each ray [px of the full sensor] where the data
             were measured as displacements (captures, realistic sensing), else None (:attr:`displacement_px`
             derives them).
@@ -137,6 +139,7 @@ class Scene:
     heldout: Optional["Scene"] = None
     sigma_prior: Optional[tuple] = None
     sigma_prior_from: Optional[str] = None
+    cache_dir: Optional[str] = None
     displacements: Optional[torch.Tensor] = None
     observed: torch.Tensor = field(init=False, repr=False)
 

@@ -95,7 +95,8 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
     sensed = {k[len("sensing/"):]: v for k, v in arrays.items() if k.startswith("sensing/")}
     record = SensingRecord.from_arrays(sensed) if sensed else None
     if "eps" not in arrays:  # measured from images: built as a capture is, from each view's displacements
-        scene = measured_scene(ph, ambient, cameras, (origins, dirs, pixel, view_start), record, sensor, device)
+        scene = replace(measured_scene(ph, ambient, cameras, (origins, dirs, pixel, view_start), record, sensor, device),
+                        cache_dir=cache_dir)
     else:
         eps = torch.as_tensor(arrays["eps"], device=device)
         keep = torch.as_tensor(finite_or_masked(eps.cpu().numpy(), f"{sensing} sensing"), device=device)

@@ -19,7 +19,7 @@ import torch
 from nerif.data import Scene
 from nerif.data.observation import observations
 from nerif.losses import deflection_terms
-from nerif.losses.images import bandpass, cell_origin, cell_weights, photometric_residual, photometric_scale
+from nerif.losses.images import bandpass, cached_photometric_scale, cell_origin, cell_weights, photometric_residual
 from nerif.registry import Registry
 from nerif.sensing.imaging import bspline_coefficients
 from nerif.sensing.noise import FLOOR as NOISE_FLOOR
@@ -227,7 +227,7 @@ class ImageTerm(DeflectionTerm):
             if self.mode == "bspline":  # sampled through its spline's coefficients (:func:`~nerif.sensing.imaging.sample`)
                 ref = bspline_coefficients(ref)
             gain.append(A.float())
-            scale.append(photometric_scale(ref, A, mode=self.mode))
+            scale.append(cached_photometric_scale(ref, A, self.mode, scene.cache_dir))
             # the views one above the other, MARGIN rows of border between them: one sampling call per step
             refs.append(torch.nn.functional.pad(ref[None, None], (0, 0, MARGIN, MARGIN), mode="replicate")[0, 0])
             dists.append(torch.nn.functional.pad(bandpass(view.distorted, self.highpass_px, self.lowpass_px)[None, None],
