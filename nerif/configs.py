@@ -146,7 +146,7 @@ def unknown_override(args: Sequence[str]) -> Optional[str]:
 
     parser = OverridesParser.create()
     try:
-        parsed = [o for o in parser.parse_overrides([a for a in args if "=" in a and not a.startswith("-")])]
+        parsed = parser.parse_overrides([a for a in args if "=" in a and not a.startswith("-")])
     except Exception:  # a value Hydra cannot read: said elsewhere
         return None
     root = config_dir()
@@ -170,7 +170,10 @@ def unknown_override(args: Sequence[str]) -> Optional[str]:
             settings.append(key)
     if not settings:
         return None
-    cfg = compose(choices)
+    try:
+        cfg = compose(choices)
+    except Exception:  # choices Hydra refuses (a group not in the defaults given without "+"): Hydra's to say
+        return None
     for key in settings:
         node, path = cfg, []
         parts = key.split(".")

@@ -145,6 +145,8 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("data.sensor.noise_varance=1e-4", "data.sensor.noise_varance: not a setting nerif knows (did you mean "
                                        "data.sensor.noise_variance?)"),
     ("trian.iterations=3", "trian.iterations: not a setting nerif knows (did you mean train.iterations?)"),
+    # a group that may only be added, given as a choice beside a setting: Hydra's sentence, not a traceback
+    ("experiment=paper_phantom5 train.iterations=2", "To append to your default list use +experiment=paper_phantom5"),
     ("train.iterations=abc", "train.iterations=abc: a number (its default: 1200)"),  # issue 38: by kind
     ("seed=abc", "seed=abc: a number (its default: 0)"),
     ("field.hidden=64", "field.hidden=64: a list (its default: [64, 64])"),
