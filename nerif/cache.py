@@ -117,6 +117,15 @@ def _digest(top: Path) -> str:
     return h.hexdigest()[:16]
 
 
+def source_digest(*modules) -> str:
+    """A digest of ``modules``' source files: what a value cached outside the forward model (a picture, an image
+    term's scale) depends on besides its inputs, so that a change to their code makes new entries."""
+    h = hashlib.sha256()
+    for module in modules:
+        h.update(Path(module.__file__).read_bytes())
+    return h.hexdigest()[:16]
+
+
 def content_digest(array: np.ndarray) -> str:
     """A digest of an array's values, shape and dtype (what a field was computed from, wherever it came from)."""
     a = np.ascontiguousarray(array)

@@ -220,7 +220,7 @@ def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Amb
             hottest = float(ambient.temperature_from_sigma(np.float64(a)))
             warn.append(f"{100 * share:.1f} % of the flame sits at the hottest {hottest:.0f} K the field can hold "
                         f"({bound_words(ambient, source)}): it may be hotter; "
-                        f"{hot_bound_advice(hottest + 100.0, ambient, prior, source)}")
+                        f"{hot_bound_advice(hottest + 100.0, ambient, prior, source)}")  # room above the bound
         else:
             warn.append(f"{100 * share:.1f} % of the flame sits at the prior's bound sigma = {a:g}: it may be hotter; "
                         "lower the first value of field.prior")

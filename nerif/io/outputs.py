@@ -11,14 +11,16 @@ import re
 from pathlib import Path
 from typing import Optional
 
+import matplotlib
 import numpy as np
 import torch
 
-from nerif.cache import cached_arrays, content_digest
+import nerif.io.plots as plots
+from nerif.cache import cached_arrays, content_digest, source_digest
 from nerif.io.export import atomic_write, write_npz, write_png, write_vti
 from nerif.io.units import VOLUMES
 from nerif.metrics import temperature_figures, uncertainty_scores
-from nerif.io.plots import (code_version, curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
+from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
                              profiles_figure, save_figure, sensing_figure, slice_figure)
 
 log = logging.getLogger(__name__)
@@ -60,7 +62,8 @@ def write_sensing(scene, out_dir: Path, causes: tuple = (), cache_dir=None) -> N
             kept = 100 * float(np.mean(view.left_out == 0))
             title = (f"{view.camera.name}: the measurement kept {kept:.1f} % of its rays (displacements in px of the "
                      "full sensor)")
-            payload = {"picture": "measured", "title": title, "causes": list(causes), "code": code_version(),
+            payload = {"picture": "measured", "title": title, "causes": list(causes), "code": source_digest(plots),
+                       "matplotlib": matplotlib.__version__,
                        **{k: content_digest(np.asarray(a)) for k, a in (("reference", reference),
                           ("displacement", view.measured_px), ("left_out", view.left_out))}}
             png = cached_arrays(cache_dir, "picture", payload, lambda: {"png": np.frombuffer(png_bytes(

@@ -162,14 +162,6 @@ def png_bytes(fig) -> bytes:
     return buffer.getvalue()
 
 
-def code_version() -> str:
-    """What the figures' pictures depend on besides their data: this module's code and matplotlib's version (the
-    key of a cached picture, :func:`nerif.io.outputs.write_sensing`)."""
-    import hashlib
-
-    return hashlib.sha256(Path(__file__).read_bytes() + matplotlib.__version__.encode()).hexdigest()[:16]
-
-
 TERM_NAMES = {"loss": "total", "loss_boundary": "ambient faces (sigma = 0)", "loss_tv": "total variation"}
 
 

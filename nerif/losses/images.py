@@ -10,11 +10,14 @@ which :func:`photometric_scale` turns into the squared deflection misfit it stan
 from __future__ import annotations
 
 import math
+import sys
 from typing import Optional
 
 import numpy as np
 import torch
 
+import nerif.sensing.imaging as imaging
+from nerif.cache import cached_arrays, content_digest, source_digest
 from nerif.sensing.imaging import sample
 
 
@@ -101,13 +104,7 @@ def cached_photometric_scale(reference: torch.Tensor, gain: torch.Tensor, mode: 
     images reads it back (1-3 s a capture on 2 cores) and gets the same value to the last bit."""
     if cache_dir is None:
         return photometric_scale(reference, gain, mode=mode)
-    import hashlib
-    from pathlib import Path
-
-    import nerif.sensing.imaging as imaging
-    from nerif.cache import cached_arrays, content_digest
-
-    code = hashlib.sha256(Path(__file__).read_bytes() + Path(imaging.__file__).read_bytes()).hexdigest()[:16]
+    code = source_digest(sys.modules[__name__], imaging)
     payload = {"reference": content_digest(reference.detach().cpu().numpy()), "mode": mode, "code": code,
                "gain": content_digest(gain.detach().cpu().numpy())}
     return float(cached_arrays(cache_dir, "scale", payload, lambda: {
