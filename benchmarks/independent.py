@@ -1,23 +1,28 @@
-"""Every default on every independent capture: the captures another program made (``../shared/data/
-independent_capture_*``: the bunsen flame ideal, dirty and through a calibrated multi-camera rig; the lifted flame at
-the shared pixels and at 4x finer ones), each run with every default by this checkout and by each ``--against``
-checkout, side by side in one run, against the capture's truth.
+"""Every default on every independent capture: the captures another program made, with their truths (the bunsen
+flame ideal, dirty and through a calibrated multi-camera rig; the lifted flame at the shared pixels and at 4x finer
+ones; the six random flames of ``independent_family``; the lifted and bunsen flames in front of real photographed
+backgrounds), each run with every default by this checkout and by each ``--against`` checkout, side by side in one
+run, against the capture's truth; and beside them CGLS-TV at the weight the held-out view picks.
 
-    python benchmarks/independent.py --against 579c785                 # this checkout against that commit
-    python benchmarks/independent.py --variant flow:data_term=flow     # and this checkout with other settings
-    python benchmarks/independent.py --captures lifted lifted_fine --resume
+    python benchmarks/independent.py --against bb33d96 --seeds 0 1 --tv        # the judgement of a default
+    python benchmarks/independent.py --variant flow:data_term=flow             # this checkout with other settings
+    python benchmarks/independent.py --captures lifted family-113 --resume
 
-A default changes only where it loses on no capture by more than 2 % (the ``worst`` column: the largest ratio of a
-row's sigma error to the first row's over the captures). Rays are one voxel apart at the probe centre (4 image
-pixels, 16 on the fine capture: what ``data.binning=auto`` picks, set explicitly for older checkouts). Each run is ``python -m nerif`` in a subprocess with that
-checkout's code (``same_figures.run``); ``--resume`` reads back the runs an earlier call finished. Prints one table
-(sigma relative error, and T RMSE [K], held-out share explained, wall time [s] per capture) and writes
-``independent.json`` and ``independent.md`` under ``--out``.
+A default changes only where the geometric mean of its ratios to the first row improves and no capture loses by
+more than its run-to-run spread (``--seeds``: each row run with each seed; a capture's spread is the largest relative
+difference between two seeds of one row). Rays are one voxel apart at the probe centre (4 image pixels, 16 on the fine
+capture: what ``data.binning=auto`` picks, set explicitly for older checkouts). Each run is ``python -m nerif`` in a
+subprocess with that checkout's code (``same_figures.run``); ``--resume`` reads back the runs an earlier call
+finished. ``--tv``: CGLS with total variation (the variants' checkout) at each weight of :data:`TV_WEIGHTS`, the one whose
+held-out deflections are best (:func:`nerif.metrics.select_by_heldout`: no truth) reported beside nerif. Prints one
+table (sigma relative error per capture, the mean over the seeds; the ratios' geometric mean and worst; nerif over
+TV) and writes ``independent.json`` and ``independent.md`` under ``--out``.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import re
 import shutil
 import sys
@@ -30,15 +35,28 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from same_figures import REPO, SHARED, output_folder, run  # noqa: E402
 from speed import checkout  # noqa: E402
 
-CAPTURES = ("bunsen", "bunsen_dirty", "bunsen_multicam", "lifted", "lifted_fine")
-KEYS = ("sigma_relative_error", "temperature_rmse_K", "heldout_explained", "data_term", "data_term_kept",
-        "flow_stage", "images_stage")
+FAMILY = ("family-101", "family-102", "family-103", "family-104", "family-111", "family-113")
+REAL = ("real_lifted_jet", "real_bunsen_blowtorch")
+CAPTURES = ("bunsen", "bunsen_dirty", "bunsen_multicam", "lifted", "lifted_fine", *FAMILY, *REAL)
+KEYS = ("sigma_relative_error", "temperature_rmse_K", "heldout_explained", "heldout_deflection_rmse", "data_term",
+        "data_term_kept", "flow_stage", "images_stage", "wall_time_s")
+TV_WEIGHTS = (1e-3, 1e-2, 1e-1, 3e-1)
+CGLS_TV = ["solver=cgls", "solver.regularizer=tv"]
+
+
+def capture_root(name: str) -> Path:
+    """The shared folder of capture ``name``."""
+    if name in FAMILY:
+        return SHARED / "independent_family" / name
+    if name in REAL:
+        return SHARED / f"real_background_{name[len('real_'):]}"
+    return SHARED / f"independent_capture_{name}"
 
 
 def capture_overrides(name: str, out: Path) -> list[str]:
     """``python -m nerif`` overrides of capture ``name`` (the multicam capture through the version-3 rig file of
     ``benchmarks/calibrated.py``, made under ``out``), scored against its truth."""
-    root = SHARED / f"independent_capture_{name}"
+    root = capture_root(name)
     if name == "bunsen_multicam":
         from calibrated import multicam_folder
 
@@ -67,26 +85,85 @@ def one(tree: Path, overrides: list[str], folder: Path, resume: bool) -> dict:
     return row
 
 
-def report(table: dict, rows: list[str], captures: list[str]) -> str:
-    """The markdown table: a row per checkout or variant, a column per capture, and the worst ratio to the first row."""
-    def cell(r):
-        if not r or r.get("sigma_relative_error") is None:
-            return f"exit {r.get('exit') if r else '-'}"
-        ex = r.get("heldout_explained")
-        return (f"**{r['sigma_relative_error']:.4f}** / {r['temperature_rmse_K']:.1f} K / "
-                f"{'-' if ex is None else f'{ex:.3f}'} / {r['wall_s']:.0f} s")
+def error(runs: list[dict]) -> float | None:
+    """The mean sigma error of a row's runs of one capture (one per seed); None where none finished."""
+    e = [r["sigma_relative_error"] for r in runs if r and r.get("sigma_relative_error") is not None]
+    return sum(e) / len(e) if e else None
 
+
+def spread(runs: list[dict]) -> float:
+    """The run-to-run spread of a row on one capture: the largest relative difference between two of its seeds."""
+    e = [r["sigma_relative_error"] for r in runs if r and r.get("sigma_relative_error") is not None]
+    return (max(e) - min(e)) / (sum(e) / len(e)) if len(e) > 1 else 0.0
+
+
+def tv_pick(runs: dict) -> tuple[str, dict] | None:
+    """The TV weight (key) whose run predicts the held-out rays best, and that run; None where none finished."""
+    from nerif.metrics import select_by_heldout
+
+    done = {k: r for k, r in runs.items() if r and r.get("heldout_deflection_rmse") is not None}
+    if not done:
+        return None
+    k = select_by_heldout(done)
+    return k, done[k]
+
+
+def summary(table: dict, rows: list[str], captures: list[str]) -> dict:
+    """Per row: each capture's mean error, the ratio to the first row and whether it loses beyond the capture's
+    spread (the larger of the two rows'), the ratios' geometric mean and worst; and nerif over TV per capture."""
     first = rows[0]
-    lines = ["| checkout or variant | " + " | ".join(captures) + f" | worst ratio to {first} |",
-             "|---|" + "---|" * (len(captures) + 1)]
+    out = {}
     for name in rows:
-        ratios = [table[c][name]["sigma_relative_error"] / table[c][first]["sigma_relative_error"]
-                  for c in captures if (table[c][name] or {}).get("sigma_relative_error")
-                  and (table[c][first] or {}).get("sigma_relative_error")]
-        worst = f"{max(ratios):.3f}" if ratios else "-"
-        lines.append(f"| {name} | " + " | ".join(cell(table[c][name]) for c in captures) + f" | {worst} |")
+        per, logs = {}, []
+        for c in captures:
+            e, e0 = error(table[c][name]), error(table[c][first])
+            if e is None or e0 is None:
+                per[c] = {"error": e}
+                continue
+            s = max(spread(table[c][name]), spread(table[c][first]))
+            per[c] = {"error": e, "ratio": e / e0, "spread": s, "beyond_spread": e / e0 > 1 + s}
+            logs.append(math.log(e / e0))
+        out[name] = {"captures": per, "geometric_mean": math.exp(sum(logs) / len(logs)) if logs else None,
+                     "worst": max((p["ratio"] for p in per.values() if "ratio" in p), default=None),
+                     "losses_beyond_spread": [c for c, p in per.items() if p.get("beyond_spread")]}
+        if table.get("tv"):
+            out[name]["over_tv"] = {c: per[c]["error"] / table["tv"][c]["pick"]["sigma_relative_error"]
+                                    for c in captures if per[c].get("error") and (table["tv"].get(c) or {}).get("pick")}
+    return out
+
+
+def report(table: dict, rows: list[str], captures: list[str], sums: dict) -> str:
+    """The markdown table: a row per checkout or variant, a column per capture (sigma error, the mean over the seeds,
+    and the spread between them), the geometric mean and worst of the ratios to the first row."""
+    first = rows[0]
+
+    def cell(name, c):
+        p = sums[name]["captures"][c]
+        if p.get("error") is None:
+            r = (table[c][name] or [{}])[0] or {}
+            return f"exit {r.get('exit', '-')}"
+        s = f" +-{100 * p['spread'] / 2:.1f}%" if p.get("spread") else ""
+        flag = " (!)" if p.get("beyond_spread") else ""
+        return f"**{p['error']:.4f}**{s}{flag}"
+
+    lines = ["| checkout or variant | " + " | ".join(captures) + f" | geometric mean of ratios to {first} | worst |",
+             "|---|" + "---|" * (len(captures) + 2)]
+    for name in rows:
+        gm, worst = sums[name]["geometric_mean"], sums[name]["worst"]
+        lines.append(f"| {name} | " + " | ".join(cell(name, c) for c in captures) +
+                     f" | {'-' if gm is None else f'{gm:.3f}'} | {'-' if worst is None else f'{worst:.3f}'} |")
+    if table.get("tv"):
+        tv = table["tv"]
+        lines.append("| CGLS-TV, weight by the held-out view | " + " | ".join(
+            f"{tv[c]['pick']['sigma_relative_error']:.4f} ({tv[c]['lam']})" if (tv.get(c) or {}).get("pick") else "-"
+            for c in captures) + " | | |")
+        for name in rows:
+            ov = sums[name].get("over_tv", {})
+            lines.append(f"| {name} / TV | " + " | ".join(f"{ov[c]:.2f}" if c in ov else "-" for c in captures) +
+                         " | | |")
     lines.append("")
-    lines.append("Each cell: sigma relative error / T RMSE / held-out share explained / wall time of the run.")
+    lines.append("Each cell: sigma relative error against the truth, the mean over the seeds, +- half the spread "
+                 "between them; (!) where it loses to the first row by more than the spread.")
     return "\n".join(lines) + "\n"
 
 
@@ -97,6 +174,9 @@ def main(argv=None) -> dict:
                     help="this checkout with other settings, e.g. 'flow:data_term=flow' (overrides space-separated)")
     ap.add_argument("--variant-tree", default=None, help="the checkout the variants run (default: this one)")
     ap.add_argument("--captures", nargs="*", choices=CAPTURES, default=list(CAPTURES))
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0], help="each row run with each seed (the spread)")
+    ap.add_argument("--tv", action="store_true",
+                    help="also CGLS-TV at the held-out view's weight (the variants' checkout: this one by default)")
     ap.add_argument("--no-defaults", action="store_true", help="leave out this checkout's own row")
     ap.add_argument("--resume", action="store_true", help="read back the runs an earlier call finished")
     ap.add_argument("--out", default="benchmarks/results/independent")
@@ -108,6 +188,9 @@ def main(argv=None) -> dict:
         if not sep or not name:
             raise SystemExit(f"--variant {v!r}: NAME:OVERRIDES, e.g. 'flow:data_term=flow'")
         variants[name] = settings.split()
+    missing = [c for c in args.captures if not capture_root(c).is_dir()]
+    if missing:
+        raise SystemExit(f"no shared capture for {', '.join(missing)} under {SHARED}")
     table: dict = {c: {} for c in args.captures}
     with ExitStack() as stack:
         trees = {} if args.no_defaults else {"this checkout": (REPO, [])}
@@ -119,12 +202,27 @@ def main(argv=None) -> dict:
         for c in args.captures:
             for name, (tree, settings) in trees.items():
                 slug = re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
-                r = one(tree, [*capture_overrides(c, out), *settings], out / c / slug, args.resume)
-                table[c][name] = r
-                print(f"{c} @ {name}: {r}", flush=True)
-    text = report(table, list(trees), args.captures)
+                table[c][name] = []
+                for seed in args.seeds:
+                    folder = out / c / (slug if seed == 0 else f"{slug}-seed{seed}")
+                    r = one(tree, [*capture_overrides(c, out), *settings, f"seed={seed}"], folder, args.resume)
+                    table[c][name].append(r)
+                    print(f"{c} @ {name}, seed {seed}: {r}", flush=True)
+        if args.tv:
+            table["tv"] = {}
+            for c in args.captures:
+                runs = {}
+                for lam in TV_WEIGHTS:
+                    runs[f"{lam:g}"] = one(tree, [*capture_overrides(c, out), *CGLS_TV, f"solver.lam={lam:g}"],
+                                           out / c / f"cgls-tv-{lam:g}", args.resume)
+                    print(f"{c} @ cgls-tv {lam:g}: {runs[f'{lam:g}']}", flush=True)
+                pick = tv_pick(runs)
+                table["tv"][c] = {"runs": runs, "lam": pick[0] if pick else None, "pick": pick[1] if pick else None}
+    sums = summary(table, list(trees), args.captures)
+    text = report(table, list(trees), args.captures, sums)
     print(text)
-    result = {"table": table, "rows": {n: {"tree": str(t), "settings": s} for n, (t, s) in trees.items()}}
+    result = {"table": table, "summary": sums, "seeds": args.seeds,
+              "rows": {n: {"tree": str(t), "settings": s} for n, (t, s) in trees.items()}}
     (out / "independent.json").write_text(json.dumps(result, indent=1))
     (out / "independent.md").write_text(text)
     return result

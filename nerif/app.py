@@ -17,6 +17,7 @@ from nerif.data.capture import image_pixels, probe_voxels
 from nerif.io.folders import check_writable, run_folder
 from nerif.memory import check_memory
 from nerif.reconstruct import WarningRecords, reconstruct, resuming
+from nerif.sensing.interpolation import INTERPOLATIONS
 from nerif.sequence import frames_of, run_sequence
 from nerif.solvers.base import check_train
 from nerif.threads import ThreadTuner, resolve_threads, usable_cores
@@ -91,8 +92,10 @@ def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     check_train(group(cfg, "train"), cfg.seed)
     device = resolve_device(cfg.device)
     capture = cfg.data.name == "capture"
+    read = cfg.data_term.get("interpolation") if cfg.solver.name == "nerif" else None
     check_memory(cfg, device, probe=probe_voxels(cfg.data.root) if capture else None,
-                 images=image_pixels(cfg.data.root) if capture else None)
+                 images=image_pixels(cfg.data.root) if capture else None,
+                 grid_factor=INTERPOLATIONS.get(read).factor if read else 1)
     with WarningRecords() as early:  # what the log warns of before the data is read goes to metrics.json too
         threads = resolve_threads(cfg.threads, parallel_jobs)
     torch.set_num_threads(threads)

@@ -15,9 +15,11 @@ import torch
 
 from nerif.data import Scene
 from nerif.data.observation import observations
-from nerif.losses.images import photometric_residual
+from nerif.losses.images import bandpass, photometric_residual
 from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
+from nerif.sensing.interpolation import Bicubic, Interpolation
 
+READ = Bicubic()  # how the held-out image residual reads the reference (a monitored figure, kept as it was)
 Predict = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (R, 3) origins [mm], dirs -> (R, 3) sigma units
 
 
@@ -131,10 +133,13 @@ class Evaluation:
                 m["heldout_photometric_rmse_none"] = self.photometric_rmse(index, torch.zeros_like(obs))
         return m
 
-    def photometric_rmse(self, index: torch.Tensor, eps: torch.Tensor) -> float:
+    def photometric_rmse(self, index: torch.Tensor, eps: torch.Tensor, read: Interpolation = READ,
+                         highpass_px: Optional[float] = None, lowpass_px: Optional[float] = None) -> float:
         """RMS over the image pixels of held-out rays ``index`` of ``I_ref(x + u) - I_dist(x)`` [image intensity,
         full range 1], ``u`` the displacement of deflections ``eps`` [rad] (R, 3), the same over each ray's block
-        of image pixels: how well the deflections explain the held-out images themselves, whatever the flow says."""
+        of image pixels: how well the deflections explain the held-out images themselves, whatever the flow says.
+        The reference read by ``read``; both images band-passed first where ``highpass_px`` or ``lowpass_px`` is
+        set (:func:`~nerif.losses.images.bandpass`: as the image term compares them)."""
         h = self.scene.heldout
         views, total, count = h.ray_views()[index], 0.0, 0
         u_all = h.to_displacement(eps.double(), index) + h.shake_px()[views]  # px of the full sensor, the shake in
@@ -144,8 +149,8 @@ class Evaluation:
             u = view.image_px(u_all[sel])
             x = view.pixels(h.pixel[index[sel]])  # (R, b^2, 2)
             u = u[:, None, :].expand(-1, x.shape[1], -1)
-            r = photometric_residual(view.reference.double(), view.distorted.double(), x.reshape(-1, 2),
-                                     u.reshape(-1, 2))
+            ref, dist = (bandpass(i.double(), highpass_px, lowpass_px) for i in (view.reference, view.distorted))
+            r = photometric_residual(read.grid(ref), dist, x.reshape(-1, 2), u.reshape(-1, 2), read)
             total, count = total + float(r.pow(2).sum()), count + r.numel()
         return (total / max(count, 1)) ** 0.5
 

@@ -51,11 +51,14 @@ def _phantom_voxels(phantom: DictConfig) -> Optional[float]:
 
 
 def estimates(cfg: DictConfig, probe: Optional[tuple[float, str]] = None,
-              images: Optional[tuple[float, str]] = None) -> list[tuple[str, str, float]]:
+              images: Optional[tuple[float, str]] = None, grid_factor: int = 1) -> list[tuple[str, str, float]]:
     """(what, the key that sets it, bytes) of a run's largest allocations. ``probe``: the voxels of the probe grid
     and the key that sets it, where the data read it from a file (a capture's rig file), else None; ``images``: the
-    pixels of a capture's images and what sets them (:func:`nerif.data.capture.image_pixels`), else None."""
-    out = [("the images", images[1], images[0] * PER_PIXEL)] if images is not None else []
+    pixels of a capture's images and what sets them (:func:`nerif.data.capture.image_pixels`), else None;
+    ``grid_factor``: the image term reads each reference on a grid this many times finer along each axis
+    (``factor^2 - 1`` floats a pixel more than the coefficients counted in :data:`PER_PIXEL`)."""
+    per_pixel = PER_PIXEL + FLOAT * (grid_factor**2 - 1)
+    out = [("the images", images[1], images[0] * per_pixel)] if images is not None else []
     if cfg.data.name == "synthetic":
         voxels = _phantom_voxels(cfg.phantom)
         if voxels is not None:  # the phantom and its deflection field on the supersampled grid, float64
@@ -86,11 +89,12 @@ def estimates(cfg: DictConfig, probe: Optional[tuple[float, str]] = None,
 
 
 def check_memory(cfg: DictConfig, device: torch.device, share: float = 0.8,
-                 probe: Optional[tuple[float, str]] = None, images: Optional[tuple[float, str]] = None) -> None:
+                 probe: Optional[tuple[float, str]] = None, images: Optional[tuple[float, str]] = None,
+                 grid_factor: int = 1) -> None:
     """One sentence, before any work, when the run's estimated allocations exceed ``share`` of the free memory of
-    ``device``, naming the largest and the key that sets it (``probe``, ``images``: as :func:`estimates` takes
-    them)."""
-    parts = estimates(cfg, probe, images)
+    ``device``, naming the largest and the key that sets it (``probe``, ``images``, ``grid_factor``: as
+    :func:`estimates` takes them)."""
+    parts = estimates(cfg, probe, images, grid_factor)
     need = sum(b for _, _, b in parts)
     free = available_bytes(device)
     if need <= share * free:

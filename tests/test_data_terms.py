@@ -8,6 +8,7 @@ from nerif.data import DATASETS
 from nerif.data.phantoms import PHANTOMS
 from nerif.renderers.voxel import voxel_deflection
 from nerif.solvers.batches import RayBatcher
+from nerif.losses.images import cell_origin
 from nerif.solvers.data_terms import DATA_TERMS
 from tests.helpers import solver, tiny_config
 
@@ -28,14 +29,18 @@ def image_term(scene, **settings):
     return DATA_TERMS.build(cfg).setup(scene, batches, 100)
 
 
-@pytest.mark.parametrize("patch", [2, 4])
-def test_the_image_term_is_least_at_the_true_field_below_the_flows_deflections(realistic, patch):
+@pytest.mark.parametrize("patch, interpolation, margin", [(2, "bandlimited", 0.8), (4, "bandlimited", 0.8),
+                                                          (2, "bspline", 0.6)])
+def test_the_image_term_is_least_at_the_true_field_below_the_flows_deflections(realistic, patch, interpolation,
+                                                                               margin):
     """Rendered from the true field, the deflections of a batch's cells explain the images better than half or
     1.5 times them, and better than the optical flow's own estimates: the chain rays -> displacements [image px]
-    -> warped reference has the right signs, gains and pixel positions."""
+    -> warped reference has the right signs, gains and pixel positions. This tiny chain's images are aliased (dots
+    of 1.2 px on pixels binned 4 x 4, the lens's blur a quarter of one): the band-limited picture through their
+    pixels is not the texture, and its residual at the truth is 0.72 of half the truth's (the B-spline's 0.52)."""
     cfg, scene = realistic
     ph = PHANTOMS.build(group(cfg, "phantom"))
-    term = image_term(scene, patch=patch)
+    term = image_term(scene, patch=patch, interpolation=interpolation)
     batch = term.draw(0)
     assert len(batch.index) == 256  # 16 patches of 4 x 4 rays: 144 cells
     eps = voxel_deflection(torch.as_tensor(ph.delta, dtype=torch.float32), ph.box, batch.origins, batch.dirs)
@@ -51,7 +56,7 @@ def test_the_image_term_is_least_at_the_true_field_below_the_flows_deflections(r
     # 46: 0.22 of no field's cost; below 0.2 when the chain warped by the bicubic kernel, nearly the term's model),
     # limit the truth's lead.
     assert truth < cost(scene.observed[batch.index])
-    assert truth < 0.6 * min(cost(0.5 * eps), cost(1.5 * eps)) and truth < 0.3 * cost(0 * eps)
+    assert truth < margin * min(cost(0.5 * eps), cost(1.5 * eps)) and truth < 0.35 * cost(0 * eps)
 
 
 def test_the_image_term_starts_on_the_flows_deflections_for_its_warm_up(realistic):
@@ -143,8 +148,8 @@ def test_on_a_tiny_capture_the_held_out_views_choose_between_the_flows_field_and
     """Issue 46: a capture folder (8-bit images through the realistic chain, an f/32 aperture) of a 3 mm flame, read
     back through the optical flow. The default first fits the flow for ``train.iterations`` (its field is the flow's
     own run: the same sigma error as ``data_term=flow``), then the images for ``image_iterations`` more, and keeps
-    the field whose held-out displacements are closer to the measured ones; the run's figures are that field's, and
-    a run that does not choose ends on the images' field the choosing run reported."""
+    the field whose held-out images it explains better (as the image term compares them); the run's figures are that
+    field's, and a run that does not choose ends on the images' field the choosing run reported."""
     from omegaconf import OmegaConf
 
     from nerif.app import run
@@ -166,7 +171,8 @@ def test_on_a_tiny_capture_the_held_out_views_choose_between_the_flows_field_and
     flow, images, kept = m["auto"]["flow_stage"], m["auto"]["images_stage"], m["auto"]["data_term_kept"]
     assert flow["sigma_relative_error"] == pytest.approx(m["flow"]["sigma_relative_error"], rel=1e-5)
     assert images["sigma_relative_error"] == pytest.approx(m["images"]["sigma_relative_error"], rel=1e-5)
-    assert kept == ("images" if images["heldout_misfit"] < flow["heldout_misfit"] else "flow")
+    assert kept == ("images" if images["heldout_image_misfit"] < flow["heldout_image_misfit"] else "flow")
+    assert m["auto"]["chosen_by"] == "held-out images"
     assert m["auto"]["sigma_relative_error"] == pytest.approx(m["auto"][f"{kept}_stage"]["sigma_relative_error"],
                                                               rel=1e-5)
     assert m["auto"]["iterations"] == 200 + 100 and "data_term_kept" not in m["images"]  # image_iterations: 0.5
@@ -273,3 +279,29 @@ def test_the_images_stage_restarts_the_schedule_and_resumes_exactly_within_it(re
     for i in range(12, 15):
         assert resumed.optimizer.param_groups[0]["lr"] == pytest.approx(rates[i])
         resumed.step()
+
+
+def test_a_ray_through_a_single_pixel_has_that_pixels_direction_and_the_term_is_least_at_the_true_field(realistic):
+    """Issue 56, ``render_at=pixels``: each ray of the images' stage passes through one pixel of a cell; its direction,
+    interpolated between the cell's corner rays, is the camera's own direction through that pixel (a pinhole's
+    directions are linear in the pixel before normalising), and rendered from the true field its deflections explain
+    the images better than half or 1.5 times them."""
+    cfg, scene = realistic
+    term = image_term(scene, interpolation="bandlimited", render_at="pixels")
+    batch = term.draw(0)
+    assert len(batch.index) == 256 and batch.pixels is not None
+    v = 0
+    mine = torch.searchsorted(scene.view_start, batch.index, right=True) - 1 == v
+    cam = scene.cameras[v].unbinned(term.b)  # one direction a pixel of the images
+    full = cam.pixel_directions(torch.float64).reshape(-1, 3)
+    x = cell_origin(scene.pixel[batch.index[mine]], scene.cameras[v].width, term.b) + batch.pixels.offsets[mine].long()
+    torch.testing.assert_close(batch.dirs[mine].double(), full[x[:, 1] * cam.width + x[:, 0]], atol=1e-6, rtol=0)
+    ph = PHANTOMS.build(group(cfg, "phantom"))
+    delta = torch.as_tensor(ph.delta, dtype=torch.float32)
+    batches = [batch] + [term.draw(i) for i in range(1, 4)]  # 1024 pixels, as many as the corners' test compares
+    true = [voxel_deflection(delta, ph.box, b.origins, b.dirs) / scene.scale for b in batches]
+
+    def cost(a):
+        return sum(float(term.terms({"discrete": a * e}, b, 0)["discrete"]) for e, b in zip(true, batches))
+
+    assert cost(1.0) < 0.8 * min(cost(0.5), cost(1.5)) and cost(1.0) < 0.35 * cost(0.0)

@@ -4,7 +4,8 @@ import pytest
 import torch
 
 from nerif.sensing.flow import FLOW
-from nerif.sensing.imaging import bspline_coefficients, diffraction_blur, sample
+from nerif.sensing.imaging import diffraction_blur
+from nerif.sensing.interpolation import bspline_coefficients, sample
 from nerif.sensing.patterns import PATTERNS
 
 

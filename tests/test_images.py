@@ -6,6 +6,9 @@ import pytest
 import torch
 
 from nerif.losses.images import bandpass, cell_origin, cell_weights, photometric_residual, photometric_scale
+from nerif.sensing.interpolation import Bicubic, interpolation
+
+BICUBIC = Bicubic()
 
 H, W = 64, 80
 
@@ -41,32 +44,40 @@ def rms(r):
     return float(r.pow(2).mean().sqrt())
 
 
-def test_the_residual_at_the_true_displacements_is_the_noise_and_far_above_it_0_3_px_off():
+@pytest.mark.parametrize("name", ["bicubic", "bspline", "bandlimited"])
+def test_the_residual_at_the_true_displacements_is_the_noise_and_far_above_it_0_3_px_off(name):
     noise = 0.01
     ref, dist, x, u = shifted_pair(noise)
+    read = interpolation(name)
+    grid = read.grid(ref)
     floor = math.sqrt(2) * noise  # two independent noisy images
-    assert rms(photometric_residual(ref, dist, x, u)) < 1.05 * floor
+    assert rms(photometric_residual(grid, dist, x, u, read)) < 1.05 * floor
     for off in ([0.3, 0.0], [0.0, -0.3], [0.21, 0.21]):
-        assert rms(photometric_residual(ref, dist, x, u + torch.tensor(off, dtype=u.dtype))) > 1.8 * floor
+        assert rms(photometric_residual(grid, dist, x, u + torch.tensor(off, dtype=u.dtype), read)) > 1.8 * floor
 
 
-@pytest.mark.parametrize("mode", ["bicubic", "bilinear"])
-def test_the_residuals_gradient_in_the_displacements_is_the_finite_differences(mode):
+@pytest.mark.parametrize("name", ["bicubic", "bilinear", "bspline", "bandlimited"])
+def test_the_residuals_gradient_in_the_displacements_is_the_finite_differences(name):
     ref, dist, x, u = shifted_pair()
+    read = interpolation(name)
+    grid = read.grid(ref)
     u = (u[:40] + 0.137).clone().requires_grad_(True)  # off the pixel grid, where bilinear is smooth too
-    assert torch.autograd.gradcheck(lambda v: photometric_residual(ref, dist, x[:40], v, mode), (u,), eps=1e-6,
+    assert torch.autograd.gradcheck(lambda v: photometric_residual(grid, dist, x[:40], v, read), (u,), eps=1e-6,
                                     atol=1e-5)
 
 
-def test_the_scale_turns_the_mean_squared_residual_into_the_squared_displacement_error():
+@pytest.mark.parametrize("name", ["bicubic", "bandlimited"])
+def test_the_scale_turns_the_mean_squared_residual_into_the_squared_displacement_error(name):
     """A displacement error du, averaged over its direction and sign (which cancels the interpolation's own error
     against the texture's gradient), adds |grad I|^2 / 2 |du|^2 to the mean squared residual: with unit gain (A =
     the identity's first two rows, |A|_F^2 / 2 = 1), that excess over the scale gives |du|^2 back."""
     ref, dist, x, u = shifted_pair(noise=0.0)
-    scale = photometric_scale(ref, torch.eye(3, dtype=torch.float64)[:2].expand(10, 2, 3))
+    read = interpolation(name)
+    grid = read.grid(ref)
+    scale = photometric_scale(grid, torch.eye(3, dtype=torch.float64)[:2].expand(10, 2, 3), read)
 
     def r2(shift):
-        return float(photometric_residual(ref, dist, x, u + torch.tensor(shift, dtype=u.dtype)).pow(2).mean())
+        return float(photometric_residual(grid, dist, x, u + torch.tensor(shift, dtype=u.dtype), read).pow(2).mean())
 
     for du in (0.05, 0.1, 0.2):
         excess = sum(r2([s * du * e[0], s * du * e[1]]) - r2([0.0, 0.0]) for s in (1, -1) for e in ((1, 0), (0, 1)))
@@ -83,13 +94,13 @@ def test_a_smooth_brightness_change_leaves_the_minimum_where_it_was_once_high_pa
     shifts = torch.linspace(-0.3, 0.3, 61, dtype=torch.float64)
 
     def best(a, b):
-        costs = [rms(photometric_residual(a, b, x, u + torch.tensor([s, 0.0], dtype=u.dtype))) for s in shifts]
+        costs = [rms(photometric_residual(a, b, x, u + torch.tensor([s, 0.0], dtype=u.dtype), BICUBIC)) for s in shifts]
         return float(shifts[int(torch.tensor(costs).argmin())])
 
     hp = (bandpass(ref, 8.0), bandpass(dist, 8.0))
     assert abs(best(*hp)) <= 0.03
-    raw = rms(photometric_residual(ref, dist, x, u))
-    assert raw > 3 * rms(photometric_residual(*hp, x, u))  # the raw images differ by the brightness itself
+    raw = rms(photometric_residual(ref, dist, x, u, BICUBIC))
+    assert raw > 3 * rms(photometric_residual(*hp, x, u, BICUBIC))  # the raw images differ by the brightness itself
 
 
 @pytest.mark.parametrize("b", [2, 3, 4, 8])
@@ -121,11 +132,12 @@ def test_the_cached_photometric_scale_is_the_scale_to_the_last_bit_and_computed_
     g = torch.Generator().manual_seed(3)
     ref = torch.rand((40, 30), generator=g, dtype=torch.float64)
     gain = torch.eye(3, dtype=torch.float64)[:2].expand(10, 2, 3) * 2.0
-    direct = photometric_scale(ref, gain)
+    direct = photometric_scale(ref, gain, BICUBIC)
     calls = []
     original = images.photometric_scale
     monkeypatch.setattr(images, "photometric_scale", lambda *a, **k: calls.append(1) or original(*a, **k))
-    assert cached_photometric_scale(ref, gain, cache_dir=tmp_path) == direct
-    assert cached_photometric_scale(ref, gain, cache_dir=tmp_path) == direct and len(calls) == 1
-    assert cached_photometric_scale(ref * 2, gain, cache_dir=tmp_path) == pytest.approx(4 * direct)
-    assert len(calls) == 2 and cached_photometric_scale(ref, gain) == direct and len(calls) == 3  # no cache: computed
+    assert cached_photometric_scale(ref, gain, BICUBIC, tmp_path) == direct
+    assert cached_photometric_scale(ref, gain, BICUBIC, tmp_path) == direct and len(calls) == 1
+    assert cached_photometric_scale(ref * 2, gain, BICUBIC, tmp_path) == pytest.approx(4 * direct)
+    assert len(calls) == 2 and cached_photometric_scale(ref, gain, BICUBIC) == direct and len(calls) == 3  # no cache
+    assert cached_photometric_scale(ref, gain, interpolation("bspline"), tmp_path) != direct  # another model: its own

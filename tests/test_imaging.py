@@ -50,59 +50,6 @@ def test_resample_takes_block_means_and_keeps_pixel_centres_aligned():
 
 
 
-def _texture(n: int, shift: float = 0.0, seed: int = 0) -> torch.Tensor:
-    """A periodic texture of 300 cosines of 3-9 px wavelength (the shared captures' band), ``shift`` px along the
-    columns exactly: ``out(x) = texture(x + shift)``; mean 0.5, RMS contrast 0.12."""
-    rng = np.random.default_rng(seed)
-    waves = []
-    while len(waves) < 300:
-        k = rng.integers(-n // 2, n // 2, 2)
-        if 3.0 <= n / max(np.hypot(*k), 1e-9) <= 9.0:
-            waves.append((k, rng.uniform(0, 2 * np.pi)))
-    rows, cols = np.mgrid[0:n, 0:n].astype(float)
-    img = sum(np.cos(2 * np.pi * (k[0] * (cols + shift) + k[1] * rows) / n + p) for k, p in waves)
-    return torch.as_tensor(0.5 + 0.12 * img / np.sqrt(len(waves) / 2))
-
-
-def test_the_cubic_b_spline_models_a_sub_pixel_shift_well_below_the_noise():
-    """Issue 39: the image term's warp model. A texture of the shared captures' band shifted 0.3 px, sampled from
-    the unshifted one at the shifted points, against the exact shift: the model's error against 1 % sensor noise
-    (2.55 code values of 8 bit) and against the signal (the change the shift makes). Measured: bilinear 4.9, bicubic
-    1.25, B-spline 0.64 code values, the signal 9.8."""
-    from nerif.sensing.imaging import bspline_coefficients, sample
-
-    n, s, noise = 128, 0.3, 0.01
-    ref, exact = _texture(n), _texture(n, s)
-    rows, cols = torch.meshgrid(torch.arange(8, n - 8, dtype=torch.float64), torch.arange(8, n - 8, dtype=torch.float64),
-                                indexing="ij")
-    x = torch.stack([cols.reshape(-1) + s, rows.reshape(-1)], -1)
-    target = exact[8:-8, 8:-8].reshape(-1)
-    signal = float((exact - ref)[8:-8, 8:-8].pow(2).mean().sqrt())
-    error = {m: float((sample(ref, x, m) - target).pow(2).mean().sqrt()) for m in ("bilinear", "bicubic")}
-    error["bspline"] = float((sample(bspline_coefficients(ref), x, "bspline") - target).pow(2).mean().sqrt())
-    assert error["bspline"] < 0.3 * noise and error["bspline"] < 0.1 * signal, error
-    assert error["bspline"] < 0.6 * error["bicubic"] < 0.6 * 0.5 * error["bilinear"], error
-
-
-def test_the_b_spline_interpolates_and_is_exact_and_differentiable_on_a_ramp():
-    from nerif.sensing.imaging import bspline_coefficients, sample
-
-    rng = torch.Generator().manual_seed(0)
-    img = torch.rand(20, 30, generator=rng, dtype=torch.float64)
-    c = bspline_coefficients(img)
-    rows, cols = torch.meshgrid(torch.arange(20.0, dtype=torch.float64), torch.arange(30.0, dtype=torch.float64),
-                                indexing="ij")
-    at_pixels = sample(c, torch.stack([cols.reshape(-1), rows.reshape(-1)], -1), "bspline")
-    assert torch.allclose(at_pixels, img.reshape(-1), atol=1e-10)  # it passes through every pixel value
-    rows, cols = torch.meshgrid(torch.arange(60.0, dtype=torch.float64), torch.arange(80.0, dtype=torch.float64),
-                                indexing="ij")
-    ramp = 0.3 + 0.01 * cols + 0.02 * rows  # the mirrored border bends it; 20 px inside, by 0.27^20 of a step
-    x = (torch.rand(50, 2, generator=rng, dtype=torch.float64) * torch.tensor([40.0, 20.0]) + 20).requires_grad_()
-    v = sample(bspline_coefficients(ramp), x, "bspline")
-    assert torch.allclose(v, 0.3 + 0.01 * x[:, 0] + 0.02 * x[:, 1], atol=1e-10)
-    v.sum().backward()
-    assert torch.allclose(x.grad, torch.tensor([0.01, 0.02], dtype=torch.float64).expand(50, 2), atol=1e-10)
-
 
 def test_a_pixel_records_the_share_of_its_area_a_displaced_sharp_edge_covers():
     """A camera's pixel integrates: a dark-bright edge on a pixel boundary, moved 0.3 px, lights 0.3 of the pixel

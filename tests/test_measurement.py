@@ -149,7 +149,8 @@ def test_a_texture_many_pixels_wide_is_measured_on_images_made_smaller():
     camera; field and noise alike) ``flow_factor=auto`` measures on images made 2x smaller: measured 0.0059 px of
     error a pixel of the 1x grid against 0.021 on the images as they are, gain 1.01 against 0.92; on the pattern
     as it is, auto changes nothing."""
-    from nerif.sensing.imaging import bspline_coefficients, resample, sample
+    from nerif.sensing.imaging import resample
+    from nerif.sensing.interpolation import bspline_coefficients, sample
 
     rng = np.random.default_rng(0)
     for k in (1, 4):

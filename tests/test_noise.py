@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 import torch
 
-from nerif.sensing.imaging import bspline_coefficients, diffraction_blur, sample
+from nerif.sensing.imaging import diffraction_blur
+from nerif.sensing.interpolation import bspline_coefficients, sample
 from nerif.sensing.noise import residual_noise
 from nerif.sensing.patterns import PATTERNS
 

@@ -1,5 +1,6 @@
 """Occluders and saturated pixels (:mod:`nerif.sensing.occlusion`, :mod:`nerif.sensing.saturation`)."""
 import numpy as np
+import pytest
 import torch
 
 from nerif.sensing.imaging import diffraction_blur
@@ -62,3 +63,17 @@ def test_a_sparse_patch_of_a_random_pattern_is_not_an_occluder():
     hidden = occluded(ref)
     assert not hidden[:160].any()  # no blob anywhere in the pattern
     assert hidden[180:, 130:170].all()
+
+
+@pytest.mark.parametrize("density, radius", [(0.02, 1.0), (0.04, 1.0), (0.1, 2.5)])
+def test_a_uniformly_random_pattern_has_no_occluder_whatever_its_gaps_and_a_mount_in_it_is_found(density, radius):
+    """Issue 56: the gaps of a random pattern of sparse dots (0.02 a px: 7 px apart, gaps 10 px wide, while the
+    texture's width is 2.2 px) are many and alike; the rule of one texture width took 1.6-22 % of such patterns as
+    occluded. The pattern's own gaps set the bar: none taken, a dark mount 60 px wide found whole."""
+    img = PATTERNS.build({"name": "random_dots", "density": density, "radius_px": radius}, height=400, width=400,
+                         seed=1)
+    img = diffraction_blur(torch.as_tensor(img), 2.0).numpy()
+    assert not occluded(img).any()
+    img[300:, 150:210] = 0.0
+    hidden = occluded(img)
+    assert hidden[305:, 155:205].all() and not hidden[:250].any()

@@ -7,7 +7,7 @@ from nerif.configs import group
 from nerif.data import DATASETS
 from nerif.losses.images import bandpass, block_pixels
 from nerif.sensing.displacement import displacement_matrix
-from nerif.sensing.imaging import sample
+from nerif.sensing.interpolation import sample
 from nerif.solvers.voxel.unified import unified_system
 from tests.helpers import solver, tiny_config
 

@@ -283,10 +283,15 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
             held.append(f"image residual {100 * m['heldout_photometric_rmse']:.2f} % of full range{ref}")
         parts.append("held out: " + "; ".join(held))
     if m.get("flow_stage") and m.get("images_stage"):  # the held-out views chose between the flow's field and the images'
-        flow, images = m["flow_stage"]["heldout_misfit"], m["images_stage"]["heldout_misfit"]
         whose = "the images'" if m["data_term_kept"] == "images" else "the flow's"
-        unit = "sigma" if "deflection_unit" in m else "px"
-        parts.append(f"kept {whose} field (held out: images {images:.3g}, flow {flow:.3g} {unit})")
+        if "heldout_image_misfit" in m["images_stage"] and "heldout_image_misfit" in m["flow_stage"]:
+            flow, images = (100 * m[k]["heldout_image_misfit"] for k in ("flow_stage", "images_stage"))
+            parts.append(f"kept {whose} field (held-out image residual: images {images:.3g}, flow {flow:.3g} % of "
+                         "full range)")
+        else:
+            flow, images = m["flow_stage"]["heldout_misfit"], m["images_stage"]["heldout_misfit"]
+            unit = "sigma" if "deflection_unit" in m else "px"
+            parts.append(f"kept {whose} field (held out: images {images:.3g}, flow {flow:.3g} {unit})")
     elif m.get("data_term_kept"):  # a series: how often each was kept
         parts.append(f"field kept: {m['data_term_kept']}")
     if known("T_std_median_flame_K"):

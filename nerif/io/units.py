@@ -26,6 +26,9 @@ KEYS = {
     "heldout_photometric_rmse_flow": "1 (share of the images' full range)",
     "heldout_photometric_rmse_none": "1 (share of the images' full range)",
     "heldout_misfit": "px (the held-out displacement RMSE; sigma where there is no temperature)",
+    "heldout_image_misfit": "1 (share of the images' full range: the held-out image residual, both images band-passed "
+                            "and the reference read as the image term compares them)",
+    "chosen_by": "(what chose the field kept: held-out images or held-out displacements)",
     "ms_per_iteration": "ms", "ms_per_iteration_mean": "ms", "samples_per_second": "1/s",
     "samples_per_ray_mean": "samples", "samples_per_ray_max": "samples", "field_evaluations_per_sample": "evaluations",
     "iterations": "iterations", "iteration": "iterations", "images_from_iteration": "iterations",

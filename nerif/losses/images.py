@@ -16,9 +16,9 @@ from typing import Optional
 import numpy as np
 import torch
 
-import nerif.sensing.imaging as imaging
+import nerif.sensing.interpolation as interpolation
 from nerif.cache import cached_arrays, content_digest, source_digest
-from nerif.sensing.imaging import sample
+from nerif.sensing.interpolation import Interpolation
 
 
 def cell_weights(b: int, dtype=torch.float32, device=None) -> tuple[torch.Tensor, torch.Tensor]:
@@ -60,27 +60,28 @@ def cell_origin(pixel: torch.Tensor, width: int, b: int) -> torch.Tensor:
 
 
 def photometric_residual(reference: torch.Tensor, distorted: torch.Tensor, x: torch.Tensor, u: torch.Tensor,
-                         mode: str = "bicubic") -> torch.Tensor:
+                         read: Interpolation) -> torch.Tensor:
     """``I_ref(x + u) - I_dist(x)`` at integer image pixels ``x`` (P, 2) (column, row) with displacements ``u``
-    (P, 2) [px], differentiable in ``u``. Images (H, W). Returns (P,)."""
+    (P, 2) [px], differentiable in ``u``: ``distorted`` (H, W), ``reference`` the grid ``read`` reads
+    (:meth:`~nerif.sensing.interpolation.Interpolation.grid` of the (H, W) reference). Returns (P,)."""
     W = distorted.shape[1]
     xi = x.long()
     observed = distorted.reshape(-1)[xi[:, 1] * W + xi[:, 0]]
-    return sample(reference, x.to(u.dtype) + u, mode) - observed
+    return read.at(reference, x.to(u.dtype) + u) - observed
 
 
 SCALE_POINTS = 2**18  # points :func:`photometric_scale` averages over, at most
 
 
-def photometric_scale(reference: torch.Tensor, gain: torch.Tensor, step_px: float = 0.05, mode: str = "bicubic") -> float:
+def photometric_scale(reference: torch.Tensor, gain: torch.Tensor, read: Interpolation, step_px: float = 0.05) -> float:
     """What one unit of squared residual is worth in squared deflection units: the mean squared change of the
     reference image per px^2 of displacement, averaged over the two directions, measured as the residual sees it
     (the image shifted ``step_px`` with the same interpolation, from points at random sub-pixel positions:
     differences on the pixel grid underestimate the gradient of a texture a few pixels fine, by 4x at 5 px, and
     the interpolant's gradient is larger at the pixel centres than between them), times ``mean |A|_F^2 / 2``
     (px^2 per squared unit of deflection; ``gain``: (N, 2, 3) the displacement matrices of the view's rays), so
-    that the image term's weight is the flow term's."""
-    H, W = reference.shape
+    that the image term's weight is the flow term's. ``reference``: the grid ``read`` reads of an (H, W) image."""
+    H, W = (n // read.factor for n in reference.shape)
     g = torch.Generator().manual_seed(0)
     if (H - 5) * (W - 5) <= SCALE_POINTS:  # every pixel, moved off it at random
         rows, cols = torch.meshgrid(torch.arange(2, H - 3, dtype=torch.float64),
@@ -91,24 +92,25 @@ def photometric_scale(reference: torch.Tensor, gain: torch.Tensor, step_px: floa
         x = torch.rand((SCALE_POINTS, 2), generator=g, dtype=torch.float64) * torch.tensor([W - 5.0, H - 5.0]) + 2
     x = x.to(reference.device)
     ref = reference.double()
-    base = sample(ref, x, mode)
-    per_px2 = [float((sample(ref, x + step_px * x.new_tensor(e), mode) - base).pow(2).mean()) / step_px**2
+    base = read.at(ref, x)
+    per_px2 = [float((read.at(ref, x + step_px * x.new_tensor(e)) - base).pow(2).mean()) / step_px**2
                for e in ((1.0, 0.0), (0.0, 1.0))]
     return sum(per_px2) / 2 * float(gain.double().pow(2).sum((-2, -1)).mean()) / 2
 
 
-def cached_photometric_scale(reference: torch.Tensor, gain: torch.Tensor, mode: str = "bicubic",
+def cached_photometric_scale(reference: torch.Tensor, gain: torch.Tensor, read: Interpolation,
                              cache_dir=None) -> float:
-    """:func:`photometric_scale`, kept in ``cache_dir`` (None: computed every time) keyed by the reference's and the
-    gains' values, ``mode`` and this code's source and :mod:`nerif.sensing.imaging`'s: a second run on the same
-    images reads it back (1-3 s a capture on 2 cores) and gets the same value to the last bit."""
+    """:func:`photometric_scale`, kept in ``cache_dir`` (None: computed every time) keyed by the grid's and the
+    gains' values, the interpolation's class and this code's source and :mod:`nerif.sensing.interpolation`'s: a
+    second run on the same images reads it back (1-3 s a capture on 2 cores) and gets the same value to the last
+    bit."""
     if cache_dir is None:
-        return photometric_scale(reference, gain, mode=mode)
-    code = source_digest(sys.modules[__name__], imaging)
-    payload = {"reference": content_digest(reference.detach().cpu().numpy()), "mode": mode, "code": code,
-               "gain": content_digest(gain.detach().cpu().numpy())}
+        return photometric_scale(reference, gain, read)
+    code = source_digest(sys.modules[__name__], interpolation)
+    payload = {"reference": content_digest(reference.detach().cpu().numpy()), "read": type(read).__name__,
+               "code": code, "gain": content_digest(gain.detach().cpu().numpy())}
     return float(cached_arrays(cache_dir, "scale", payload, lambda: {
-        "scale": np.float64(photometric_scale(reference, gain, mode=mode))})["scale"])
+        "scale": np.float64(photometric_scale(reference, gain, read))})["scale"])
 
 
 def bandpass(image: torch.Tensor, highpass_px: Optional[float], lowpass_px: Optional[float] = None) -> torch.Tensor:

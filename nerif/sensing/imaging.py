@@ -11,7 +11,6 @@ import cv2
 import kornia
 import numpy as np
 import torch
-from scipy import ndimage
 
 
 def to_uint8(image) -> "np.ndarray":
@@ -68,50 +67,6 @@ def expose(background: torch.Tensor, u: Optional[torch.Tensor], samples: int, ba
                                                padding_mode="border", align_corners=True)
         out[r0:r1] = torch.nn.functional.avg_pool2d(seen, s)[0, 0]
     return out
-
-
-def sample(image: torch.Tensor, x: torch.Tensor, mode: str = "bicubic") -> torch.Tensor:
-    """The image at points ``x`` (P, 2) [px] (column, row; pixel centres at integers), differentiable in ``x``:
-    (H, W) -> (P,). Points past the border read the border value. ``mode``: ``bilinear``, ``bicubic`` (PyTorch's
-    cubic convolution, a = -0.75) or ``bspline`` (the cubic B-spline, ``image`` then holding its coefficients,
-    :func:`bspline_coefficients`): on a texture of 3-9 px wavelengths shifted 0.3 px, their model errors are 50 %,
-    13 % and 6.5 % of the change the shift makes (``tests/test_imaging.py``)."""
-    if mode == "bspline":
-        return _bspline(image, x)
-    H, W = image.shape
-    scale = x.new_tensor([2.0 / max(W - 1, 1), 2.0 / max(H - 1, 1)])
-    grid = (x * scale - 1.0).to(image.dtype)[None, None]  # (1, 1, P, 2), align_corners=True
-    out = torch.nn.functional.grid_sample(image[None, None], grid, mode=mode, padding_mode="border",
-                                          align_corners=True)
-    return out[0, 0, 0]
-
-
-def _mirrored(i: torch.Tensor, n: int) -> torch.Tensor:
-    """Indices reflected about the first and last pixel (scipy's ``mirror``: -1 -> 1, n -> n - 2), then clamped."""
-    i = torch.where(i < 0, -i, i)
-    return torch.where(i > n - 1, 2 * (n - 1) - i, i).clamp(0, n - 1)
-
-
-def bspline_coefficients(image: torch.Tensor) -> torch.Tensor:
-    """(H, W) -> (H, W) the coefficients of the cubic B-spline through ``image``'s pixel values (mirror boundary;
-    ``scipy.ndimage.spline_filter``), what :func:`sample` reads with ``mode="bspline"``."""
-    c = ndimage.spline_filter(image.detach().cpu().double().numpy(), order=3, mode="mirror")
-    return torch.as_tensor(c, dtype=image.dtype, device=image.device)
-
-
-def _bspline(coefficients: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
-    """The cubic B-spline of ``coefficients`` (H, W) at ``x`` (P, 2) [px] (column, row): the 4 x 4 coefficients
-    around each point, weighted by the B-spline's basis; past the border the coefficients mirror about the edge
-    pixel, as :func:`bspline_coefficients` assumed them (then clamped: far outside reads the border's)."""
-    H, W = coefficients.shape
-    whole = torch.floor(x)
-    t = (x - whole).to(coefficients.dtype)
-    t2, t3 = t * t, t * t * t
-    w = torch.stack([(1 - t) ** 3, 3 * t3 - 6 * t2 + 4, -3 * t3 + 3 * t2 + 3 * t + 1, t3], -1) / 6  # (P, 2, 4)
-    k = torch.arange(-1, 3, device=x.device)
-    cols, rows = (_mirrored(whole[:, a:a + 1].long() + k, n) for a, n in ((0, W), (1, H)))
-    near = coefficients.reshape(-1)[rows[:, :, None] * W + cols[:, None, :]]  # (P, 4 rows, 4 columns)
-    return torch.einsum("pr,pc,prc->p", w[:, 1], w[:, 0], near)
 
 
 def diffraction_blur(image: torch.Tensor, d_diff_px: float) -> torch.Tensor:

@@ -2,10 +2,10 @@
 
 Per view: finite-aperture rendering of the deflections (``aperture_rays`` rays per pixel from points across
 the lens to the background point the pixel is focused on, averaged: the probe is seen blurred by the circle
-of confusion), conversion to image displacements, a seeded background pattern seen through them as a camera's pixels integrate it
-(``pixel_samples`` points a pixel and axis, each displaced; 1: the pattern sampled at pixel centres and warped by
-bicubic interpolation, much as the image term models a view), diffraction blur and sensor noise on the distorted
-and the reference image, then the measurement stage a capture goes through
+of confusion), conversion to image displacements, a seeded background pattern blurred by diffraction and seen
+through them as a camera's pixels integrate it (``pixel_samples`` points a pixel and axis, each displaced; 1: the
+pattern sampled at pixel centres and warped by bicubic interpolation, much as the image term models a view, then
+blurred), sensor noise on the distorted and the reference image, then the measurement stage a capture goes through
 (:func:`nerif.sensing.measurement.measure_view`: the optical flow, block means to the training grid, validity), and
 the estimated displacements converted back to world-frame deflections on the training rays.
 
@@ -86,7 +86,11 @@ def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_v
             more than 1, each pixel integrates it (:func:`nerif.sensing.imaging.expose`); 1, the pattern at the
             displaced pixel centres, interpolated bicubically (:func:`nerif.sensing.imaging.warp`).
         u: (H, W, 2) displacements [px of these images].
-        blur_px: the diffraction spot's diameter [px]. noise_variance: of the additive Gaussian noise on each.
+        blur_px: the diffraction spot's diameter [px]: with ``samples`` above 1 the lens blurs the background before
+            the pixels integrate it, as a camera's optics do (:func:`nerif.sensing.imaging.diffraction_blur` on the
+            fine grid; the displacements vary little over the spot); with 1, the sampled image is blurred (the
+            chain of before issue 56, whose images keep the aliasing a lens removes).
+        noise_variance: of the additive Gaussian noise on each.
         gain_drift: the distorted exposure's brightness over the reference's, less 1; ``gain_ramp``: that gain
             grows by this much more from the left edge to the right (an uneven illumination drift).
         glow: (H, W) the flame's own light on the distorted exposure, as a fraction of the background's mean
@@ -96,10 +100,13 @@ def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_v
     Returns: (H, W) reference and distorted images (floats, noise drawn from ``generator``: reference first), clipped
     to [0, 1] as a sensor clips at its full scale.
     """
-    seen = expose(background, u, samples) if samples > 1 else warp(background, u)
-    reference = diffraction_blur(expose(background, None, samples), blur_px)
+    if samples > 1:
+        background = diffraction_blur(background, blur_px * samples)  # the lens, then the pixels
+        reference, seen = expose(background, None, samples), expose(background, u, samples)
+    else:
+        reference, seen = (diffraction_blur(x, blur_px) for x in (background, warp(background, u)))
     gain = (1.0 + gain_drift) * (1.0 + gain_ramp * torch.linspace(0.0, 1.0, u.shape[1]))[None, :]
-    distorted = diffraction_blur(seen, blur_px) * gain
+    distorted = seen * gain
     if hidden is not None:
         occluder = torch.as_tensor(hidden)
         reference, distorted = (torch.where(occluder, DARK, x) for x in (reference, distorted))

@@ -21,7 +21,7 @@ from nerif.data.observation import observations
 from nerif.losses import deflection_terms
 from nerif.losses.images import bandpass, cached_photometric_scale, cell_origin, cell_weights, photometric_residual
 from nerif.registry import Registry
-from nerif.sensing.imaging import bspline_coefficients
+from nerif.sensing.interpolation import INTERPOLATIONS, interpolation as interpolation_named
 from nerif.sensing.noise import FLOOR as NOISE_FLOOR
 from nerif.solvers.batches import RayBatcher
 
@@ -32,12 +32,31 @@ MARGIN = 4  # rows of border between views in the image term's stacked images (b
 
 
 @dataclass
+class PixelRays:
+    """Rays through single image pixels of cells of the ray grid: ``corners`` (C, 4) the scene indices of each
+    cell's 2 x 2 rays (top-left, top-right, bottom-left, bottom-right), ``offsets`` (C, 2) [px] (column, row) of the
+    pixel from the cell's first pixel and ``weights`` (C, 4) its bilinear weights of the corners
+    (:func:`~nerif.losses.images.cell_weights`)."""
+
+    corners: torch.Tensor
+    offsets: torch.Tensor
+    weights: torch.Tensor
+
+    def between(self, values: torch.Tensor) -> torch.Tensor:
+        """(N, ...) per scene ray -> (C, ...) bilinear between each cell's corners, at its pixel."""
+        v = values[self.corners]  # (C, 4, ...)
+        return (self.weights.to(v.dtype).reshape(*self.weights.shape, *[1] * (v.dim() - 2)) * v).sum(1)
+
+
+@dataclass
 class RayBatch:
-    """The rays of one training step: ``origins``, ``dirs`` (R, 3) and ``index`` (R,) their scene indices."""
+    """The rays of one training step: ``origins``, ``dirs`` (R, 3) and ``index`` (R,) their scene indices (of a ray
+    through a single pixel, its cell's top-left ray's; ``pixels`` says where it passes)."""
 
     origins: torch.Tensor
     dirs: torch.Tensor
     index: torch.Tensor
+    pixels: Optional[PixelRays] = None
 
 
 def scene_rays(scene: Scene, index: torch.Tensor) -> RayBatch:
@@ -118,15 +137,15 @@ class ImageTerm(DeflectionTerm):
     """The photometric residual ``I_ref(x + u(x)) - I_dist(x)`` at every image pixel of random patches of the ray
     grid: the field's deflections are rendered at the ``patch x patch`` rays of a patch, turned into displacements
     [image px] through the rig geometry, interpolated bilinearly inside each cell of 2 x 2 rays to its ``b x b``
-    image pixels (``b``: rays are ``b`` image pixels apart), and the reference image is sampled there (its cubic
-    B-spline by default).
+    image pixels (``b``: rays are ``b`` image pixels apart), and the reference image is read there (the band-limited
+    picture through its pixels by default, :mod:`nerif.sensing.interpolation`).
     A patch of k x k rendered rays scores (k - 1)^2 cells: with k = 4, 2.25x the pixels of separate cells for the
     same rendering, and the residual's noise, not its cost, is what limits it. No optical flow enters it,
     except for the flow's stage first: ``flow_warmup`` of ``train.iterations`` fit the flow's deflections to start
     from (the residual is not convex beyond about half the background's texture wavelength), then the images
     refine that field for ``image_iterations`` more, the learning rate's cosine restarted at ``image_lr`` of its
     peak. The held-out views then choose (``choose_by_heldout``): where the images' field does not explain their
-    measured displacements better than the flow's field did at the end of its stage, the run keeps the flow's
+    images better than the flow's field did at the end of its stage, the run keeps the flow's
     (:class:`~nerif.solvers.neural.NeuralSolver`), so that images which a camera recorded otherwise than this
     term models them cannot make a run worse than the flow alone.
 
@@ -137,12 +156,13 @@ class ImageTerm(DeflectionTerm):
             rest of them (``1 - flow_warmup``).
         image_lr: the images' stage restarts the cosine learning-rate schedule at this share of ``train.lr``; null:
             one schedule over both stages.
-        choose_by_heldout: keep the images' field only where it explains the held-out views' displacements better
-            than the flow's field at the end of its stage (false: the images' field always).
+        choose_by_heldout: keep the images' field only where it explains the held-out views' images (as this term
+            compares them) better than the flow's field at the end of its stage (false: the images' field always).
         highpass_px: compare the images less their Gaussian blur of this width [px] (a smooth brightness
             change between the exposures, the flame's own light); null: as they are.
-        interpolation: of the reference image: ``bspline`` (the cubic B-spline through its pixels), ``bicubic``
-            (PyTorch's cubic convolution) or ``bilinear`` (:func:`nerif.sensing.imaging.sample`).
+        interpolation: how the reference image is read between its pixels (:data:`~nerif.sensing.interpolation.
+            INTERPOLATIONS`): ``bandlimited`` (the band-limited picture through its pixels: no gain bias),
+            ``bspline`` (the cubic B-spline through them), ``bicubic`` (PyTorch's cubic convolution) or ``bilinear``.
         patch: rays per side of a patch (at least 2); a step draws ``rays_per_batch / patch^2`` patches.
         lowpass_px: blur both images by a Gaussian of this width [px] first (sensor noise); null: none.
         flow_weight: in the images' stage, the flow term on the same rays is added with this weight where rays are
@@ -156,17 +176,24 @@ class ImageTerm(DeflectionTerm):
             the shake photometrically, where the flow's estimate carries its own bias (:meth:`shakes_px`).
         pixels_per_cell: compare at most this many of each cell's ``b x b`` image pixels a step, drawn afresh
             (:meth:`cell_pixels`); null: all.
+        render_at: where the field's deflections are rendered for the images: ``corners``, at the 2 x 2 rays of each
+            cell, their displacements interpolated bilinearly to its pixels (a flame sharper than the rays' spacing
+            is read smoothed: on the shared bunsen flame the photometric optimum of displacements so interpolated
+            from its true ones lies at 1.034x them, 1.009x on the lifted flame), or ``pixels``: each of the step's
+            ``rays_per_batch`` rays through one random pixel of a random cell, its direction, displacement matrix
+            and flow interpolated from the cell's corner rays (exact for a pinhole camera's directions), and that
+            pixel compared: no displacement is interpolated, at a quarter of the pixels a step.
         noise_weighted: weigh each view's residuals, and its flow's, by the noise its measurement read
             (:func:`noise_weights`, :func:`view_scales`); false: every view alike in the unit of a deflection misfit.
     """
 
     fitted = "images"
 
-    def __init__(self, flow_warmup: float = 1.0, highpass_px: Optional[float] = 8.0, interpolation: str = "bspline",
+    def __init__(self, flow_warmup: float = 1.0, highpass_px: Optional[float] = 8.0, interpolation: str = "bandlimited",
                  patch: int = 2, lowpass_px: Optional[float] = None, flow_weight: float = 1.0, shake_lr: float = 0.0,
                  noise_weighted: bool = True, pixels_per_cell: Optional[int] = 256,
                  image_iterations: Optional[float] = 0.5, image_lr: Optional[float] = 0.2,
-                 choose_by_heldout: bool = True):
+                 choose_by_heldout: bool = True, render_at: str = "corners"):
         if not 0.0 <= flow_warmup <= 1.0:
             raise ValueError(f"data_term.flow_warmup={flow_warmup}: a share of train.iterations within [0, 1]")
         if image_iterations is not None and not 0.0 < image_iterations <= 10.0:
@@ -180,11 +207,13 @@ class ImageTerm(DeflectionTerm):
         self.image_share, self.image_lr, self.choose_by_heldout = image_iterations, image_lr, bool(choose_by_heldout)
         if highpass_px is not None and not highpass_px >= 0:
             raise ValueError(f"data_term.highpass_px={highpass_px}: a width in pixels (or null)")
-        if interpolation not in ("bspline", "bicubic", "bilinear"):
-            raise ValueError(f"data_term.interpolation must be bspline, bicubic or bilinear, got '{interpolation}'")
+        if interpolation not in INTERPOLATIONS.names():
+            raise ValueError(f"data_term.interpolation must be one of {', '.join(INTERPOLATIONS.names())}, got "
+                             f"'{interpolation}'")
         if not (isinstance(patch, int) and patch >= 2):
             raise ValueError(f"data_term.patch={patch}: rays per side of a patch, at least 2")
-        self.flow_warmup, self.highpass_px, self.mode, self.k = float(flow_warmup), highpass_px, interpolation, patch
+        self.flow_warmup, self.highpass_px, self.k = float(flow_warmup), highpass_px, patch
+        self.read = interpolation_named(interpolation)
         if not flow_weight >= 0:
             raise ValueError(f"data_term.flow_weight={flow_weight}: a weight cannot be negative")
         if not shake_lr >= 0:
@@ -193,6 +222,9 @@ class ImageTerm(DeflectionTerm):
         if pixels_per_cell is not None and not (isinstance(pixels_per_cell, int) and pixels_per_cell >= 1):
             raise ValueError(f"data_term.pixels_per_cell={pixels_per_cell}: a number of image pixels (or null: all)")
         self.pixels_per_cell = pixels_per_cell
+        if render_at not in ("corners", "pixels"):
+            raise ValueError(f"data_term.render_at must be corners or pixels, got '{render_at}'")
+        self.at_pixels = render_at == "pixels"
         self.flow = DeflectionTerm(noise_weighted)
 
     def setup(self, scene: Scene, batches: RayBatcher, iterations: int, masks=None) -> "ImageTerm":
@@ -223,13 +255,13 @@ class ImageTerm(DeflectionTerm):
                 inside = (col + dc < cam.width) & (row + dr < cam.height)
                 patch[sl][inside, j] = lut[(pixel + dr * cam.width + dc)[inside]]
             A = view.gain_px  # image px per unit of sigma
-            ref = bandpass(view.reference, self.highpass_px, self.lowpass_px)
-            if self.mode == "bspline":  # sampled through its spline's coefficients (:func:`~nerif.sensing.imaging.sample`)
-                ref = bspline_coefficients(ref)
+            ref = self.read.grid(bandpass(view.reference, self.highpass_px, self.lowpass_px))
             gain.append(A.float())
-            scale.append(cached_photometric_scale(ref, A, self.mode, scene.cache_dir))
-            # the views one above the other, MARGIN rows of border between them: one sampling call per step
-            refs.append(torch.nn.functional.pad(ref[None, None], (0, 0, MARGIN, MARGIN), mode="replicate")[0, 0])
+            scale.append(cached_photometric_scale(ref, A, self.read, scene.cache_dir))
+            # the views one above the other, MARGIN rows of border between them (factor times as many on a finer
+            # grid): one sampling call per step
+            pad = self.read.factor * MARGIN
+            refs.append(torch.nn.functional.pad(ref[None, None], (0, 0, pad, pad), mode="replicate")[0, 0])
             dists.append(torch.nn.functional.pad(bandpass(view.distorted, self.highpass_px, self.lowpass_px)[None, None],
                                                  (0, 0, MARGIN, MARGIN), mode="replicate")[0, 0])
         self.b, self.rows = b, H + 2 * MARGIN
@@ -241,13 +273,15 @@ class ImageTerm(DeflectionTerm):
         # each view's shake between the exposures, which the images hold and the field does not [image px]
         self.shake = torch.stack([view.shake_px for view in self.observations]).float()
         self.shake_correction = torch.zeros_like(self.shake, requires_grad=self.shake_lr > 0)  # fitted with the field
-        self.reference, self.distorted = torch.cat(refs), torch.cat(dists)  # (V (H + 2 MARGIN), W)
+        self.reference, self.distorted = torch.cat(refs), torch.cat(dists)  # (V f (H + 2 MARGIN), f W), (V (H + 2 MARGIN), W)
         self.weights, self.pixel_offsets = cell_weights(b, torch.float32, device)
         self.patch = patch
         allowed = (patch >= 0).all(-1)
-        self.batches = RayBatcher(scene, masks.inside if masks is not None else None,
-                                  max(1, batches.rays_per_batch // (k * k)), batches.views_per_batch,
-                                  batches.outside_fraction, batches.generator, allowed)
+        cells = batches.rays_per_batch if self.at_pixels else max(1, batches.rays_per_batch // (k * k))
+        self.batches = RayBatcher(scene, masks.inside if masks is not None else None, cells,
+                                  batches.views_per_batch, batches.outside_fraction, batches.generator, allowed)
+        if self.at_pixels and k != 2:
+            raise ValueError("data_term.render_at=pixels renders one ray a cell of 2 x 2 rays: set data_term.patch=2")
         return self
 
     @staticmethod
@@ -266,11 +300,20 @@ class ImageTerm(DeflectionTerm):
     def draw(self, iteration: int) -> RayBatch:
         if iteration < self.flow_iterations:
             return self.flow.draw(iteration)
-        return scene_rays(self.scene, self.patch[self.batches(iteration)].reshape(-1))
+        if not self.at_pixels:
+            return scene_rays(self.scene, self.patch[self.batches(iteration)].reshape(-1))
+        corners = self.patch[self.batches(iteration)]  # (C, 4)
+        offsets, weights = self.cell_pixels(len(corners), 1)
+        pixels = PixelRays(corners, offsets[:, 0], weights[:, 0])
+        rays = scene_rays(self.scene, corners[:, 0].contiguous())
+        dirs = torch.nn.functional.normalize(pixels.between(self.scene.dirs), dim=-1)
+        return RayBatch(rays.origins, dirs, rays.index, pixels)
 
     def terms(self, eps: dict, batch: RayBatch, iteration: int) -> dict:
         if iteration < self.flow_iterations:
             return self.flow.terms(eps, batch, iteration)
+        if batch.pixels is not None:
+            return self.pixel_terms(eps, batch)
         s, k = self.scene, self.k
 
         def cells(a: torch.Tensor) -> torch.Tensor:  # (P k k, ...) per ray -> (C, 4, ...) per cell, its corners
@@ -291,20 +334,41 @@ class ImageTerm(DeflectionTerm):
             u = cells((A * e[:, None, :]).sum(-1))  # (C, 4, 2) [image px]
             shake = (self.shake + self.shake_correction)[views][:, None, :]
             u = torch.einsum("cpk,ckd->cpd", weights.to(u.dtype), u) + shake.to(u.dtype)
-            r = photometric_residual(self.reference, self.distorted, x, u.reshape(-1, 2), self.mode)
+            r = photometric_residual(self.reference, self.distorted, x, u.reshape(-1, 2), self.read)
             out[name] = (r.reshape(len(top), -1).pow(2).mean(-1) / self.scale[top]).mean()
         if self.flow_weight > 0:
             flow = self.flow.terms(eps, batch, iteration)
             out = {name: out[name] + self.flow_share * flow[name] for name in out}
         return out
 
-    def cell_pixels(self, n_cells: int) -> tuple[torch.Tensor, torch.Tensor]:
+    def pixel_terms(self, eps: dict, batch: RayBatch) -> dict:
+        """The residual at each ray's own pixel (``render_at=pixels``), and the flow term at the same rays, their
+        observations interpolated between the cell's corner rays."""
+        s, px = self.scene, batch.pixels
+        top = px.corners[:, 0].contiguous()
+        views = torch.searchsorted(s.view_start, top, right=True) - 1
+        x = cell_origin(s.pixel[top], s.cameras[0].width, self.b) + px.offsets.long()
+        x[:, 1] += views * self.rows + MARGIN  # the view's place in the stacked images
+        A = px.between(self.gain)  # (C, 2, 3)
+        shake = (self.shake + self.shake_correction)[views]
+        out = {}
+        for name, e in eps.items():
+            u = (A * e[:, None, :]).sum(-1) + shake.to(e.dtype)
+            r = photometric_residual(self.reference, self.distorted, x, u, self.read)
+            out[name] = (r.pow(2) / self.scale[top]).mean()
+        if self.flow_weight > 0:
+            weight = self.flow.ray_weight[top] if self.flow.ray_weight is not None else None
+            flow = deflection_terms(eps, px.between(s.observed), weight)
+            out = {name: out[name] + self.flow_share * flow[name] for name in out}
+        return out
+
+    def cell_pixels(self, n_cells: int, per_cell: Optional[int] = None) -> tuple[torch.Tensor, torch.Tensor]:
         """The image pixels a step compares in each of its ``n_cells`` cells: all ``b x b``, or where there are
-        more than ``pixels_per_cell``, that many drawn afresh for each cell and step (every pixel is compared over
-        the steps; a step's cost stays that of ``pixels_per_cell``, however many pixels a ray spans). Returns
-        (n_cells, P, 2) their offsets [px] from the cell's first pixel and (n_cells, P, 4) their corner weights
-        (:func:`~nerif.losses.images.cell_weights`)."""
-        m = self.pixels_per_cell
+        more than ``per_cell`` (default ``pixels_per_cell``), that many drawn afresh for each cell and step (every
+        pixel is compared over the steps; a step's cost stays that of ``pixels_per_cell``, however many pixels a ray
+        spans). Returns (n_cells, P, 2) their offsets [px] from the cell's first pixel and (n_cells, P, 4) their
+        corner weights (:func:`~nerif.losses.images.cell_weights`)."""
+        m = self.pixels_per_cell if per_cell is None else per_cell
         if m is None or m >= len(self.weights):
             return (self.pixel_offsets.expand(n_cells, -1, -1), self.weights.expand(n_cells, -1, -1))
         pick = torch.rand((n_cells, len(self.weights)), generator=self.batches.generator,

@@ -15,7 +15,7 @@ import torch
 
 from nerif.data.observation import observations
 from nerif.losses.images import bandpass, cached_photometric_scale
-from nerif.sensing.imaging import sample
+from nerif.sensing.interpolation import Bicubic, sample
 
 
 def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: float = 0.01, lowpass_px=None,
@@ -62,7 +62,7 @@ def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: floa
         h = (g * diff[..., None]).sum(1) + (G @ u0[..., None])[..., 0]
         G = G + 1e-9 * G.diagonal(dim1=1, dim2=2).sum(-1).mean() * torch.eye(2, dtype=G.dtype, device=G.device)
         L = torch.linalg.cholesky(G)
-        unit = b * cached_photometric_scale(ref, A, cache_dir=scene.cache_dir) ** 0.5 if deflection_units else 1.0
+        unit = b * cached_photometric_scale(ref, A, Bicubic(), scene.cache_dir) ** 0.5 if deflection_units else 1.0
         Ms.append(L.transpose(1, 2) @ A / unit)
         cs.append(torch.linalg.solve_triangular(L, h[..., None], upper=False)[..., 0] / unit)
     return torch.cat(Ms), torch.cat(cs)
