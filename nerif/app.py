@@ -93,6 +93,9 @@ def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     device = resolve_device(cfg.device)
     capture = cfg.data.name == "capture"
     read = cfg.data_term.get("interpolation") if cfg.solver.name == "nerif" else None
+    if read and read not in INTERPOLATIONS.names():
+        raise ValueError(f"data_term.interpolation={read}: not an interpolation nerif has ("
+                         f"{', '.join(INTERPOLATIONS.names())})")
     check_memory(cfg, device, probe=probe_voxels(cfg.data.root) if capture else None,
                  images=image_pixels(cfg.data.root) if capture else None,
                  grid_factor=INTERPOLATIONS.get(read).factor if read else 1)

@@ -185,9 +185,9 @@ class NeuralSolver(IterativeSolver):
         (:meth:`Evaluation.heldout_misfit`), else puts the flow's field back; says which in the log and in
         :attr:`report` (``data_term_kept``, ``chosen_by``, and ``flow_stage``, ``images_stage``: each field's
         :meth:`_stage_figures`) and returns the one it kept (None where nothing was chosen: no images' stage, no
-        held-out view, or not finished). The held-out displacements are the flow's, with the flow's bias: on the 13
-        independent captures (two seeds) they chose the field the truth prefers in 22 of 26 runs, the held-out
-        images in 26 (issue 56)."""
+        held-out view, or not finished). The held-out displacements are the flow's, with the flow's bias: over 26 runs
+        of the 13 independent captures (two seeds) they chose the field the truth prefers in 22, the held-out images
+        in 26 (the B-spline's runs) and 25 (the band-limited picture's; the one miss a tie, issue 56)."""
         if (not self.switch or self.iteration < self.iterations or "data_term_kept" in self.report
                 or not self.data_term.choose_by_heldout):  # no flow's stage (flow_warmup=0): nothing to choose from
             return None
