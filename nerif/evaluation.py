@@ -154,6 +154,25 @@ class Evaluation:
             total, count = total + float(r.pow(2).sum()), count + r.numel()
         return (total / max(count, 1)) ** 0.5
 
+    def stage_figures(self, predict: Predict, sigma: Callable[[], np.ndarray], term=None) -> dict:
+        """What a field leaves of the held-out views, so that two stages' fields can be compared
+        (:meth:`nerif.solvers.neural.NeuralSolver.choose_by_heldout`): ``heldout_misfit`` (:meth:`heldout_misfit`),
+        where they hold images ``heldout_photometric_rmse`` and, read as the image ``term`` reads them (its
+        ``read``, ``highpass_px``, ``lowpass_px``), ``heldout_image_misfit``; every held-out ray rendered once; and
+        where a truth is known the errors of the field's ``sigma()`` (:meth:`field_errors`)."""
+        h = self.scene.heldout
+        index = torch.arange(len(h.dirs), device=h.dirs.device)
+        pred = self.heldout_predictions(predict, index)
+        out = {"heldout_misfit": self.heldout_misfit(predict, pred)}
+        if h.image_block() is not None:  # the same field against the held-out images themselves
+            out["heldout_photometric_rmse"] = self.photometric_rmse(index, pred)
+            if getattr(term, "read", None) is not None:  # and as the image term compares them
+                out["heldout_image_misfit"] = self.photometric_rmse(index, pred, term.read, term.highpass_px,
+                                                                    term.lowpass_px)
+        if self.scene.truth_T is not None:
+            out.update(self.field_errors(sigma()))
+        return out
+
     def heldout_images(self, pred: torch.Tensor) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per held-out view, (observed, predicted) on its pixel grid, NaN where it has no ray: displacements
         [px] (height, width, 2) where physical, else deflections (height, width, 3); ``pred``: (N_h, 3)

@@ -9,6 +9,7 @@ from nerif.data.phantoms import PHANTOMS
 from nerif.renderers.voxel import voxel_deflection
 from nerif.solvers.batches import RayBatcher
 from nerif.losses.images import cell_origin
+from nerif.solvers.stages import StagePlan
 from nerif.solvers.data_terms import DATA_TERMS
 from tests.helpers import solver, tiny_config
 
@@ -59,16 +60,29 @@ def test_the_image_term_is_least_at_the_true_field_below_the_flows_deflections(r
     assert truth < margin * min(cost(0.5 * eps), cost(1.5 * eps)) and truth < 0.35 * cost(0 * eps)
 
 
-def test_the_image_term_starts_on_the_flows_deflections_for_its_warm_up(realistic):
+def test_the_image_term_hands_the_loop_a_flow_stage_then_an_images_stage_that_chooses(realistic):
+    """Issue 57: the term's stages (:class:`~nerif.solvers.stages.Stage`): the flow's deflections for ``flow_warmup``
+    of the iterations, on rays; then the images for ``image_iterations`` of them, on patches at the same rendering
+    cost, their schedule restarted at ``image_lr``, the held-out views choosing between the two fields."""
     cfg, scene = realistic
-    term = image_term(scene, flow_warmup=0.3)
-    flow = DATA_TERMS.build({"name": "flow"}).setup(scene, term.flow.batches, 100)
-    first = term.draw(29)
-    assert len(first.index) == 256  # rays, not cells, until iteration 30
+    term = image_term(scene, flow_warmup=0.3, choose_by_heldout=True)
+    flow, images = term.stages()
+    assert (flow.name, flow.iterations, flow.term) == ("flow", 30, term.flow)
+    assert (images.name, images.iterations, images.term, images.lr, images.choose) == ("images", 50, term, 0.2, True)
+    plan = StagePlan(term.stages())
+    assert plan.iterations == 80 and plan.at(29) == flow and plan.at(30) == images and plan.ending(30) == flow
+    assert plan.chooser == images and plan.before_chooser == flow and plan.restarts(30)
+    assert plan.schedule(10) == (1.0, 30) and plan.schedule(30) == (0.2, 50)
+    reference = DATA_TERMS.build({"name": "flow"}).setup(scene, term.flow.batches, 100)
+    first = flow.term.draw(29)
+    assert len(first.index) == 256  # rays, not cells, in the flow's stage
     e = {"discrete": torch.zeros(len(first.index), 3)}
-    assert term.terms(e, first, 29) == flow.terms(e, first, 29)
-    assert len(term.draw(30).index) == 256  # 16 patches of 16 rays: the same rendering cost per step
-    assert len(image_term(scene, patch=2).draw(0).index) == 256  # 64 cells of 2 x 2 rays
+    assert flow.term.terms(e, first, 29) == reference.terms(e, first, 29)
+    assert len(images.term.draw(30).index) == 256  # 64 patches of 2 x 2 rays: the same rendering cost per step
+    one = StagePlan(image_term(scene, flow_warmup=0.3, image_lr=None).stages())  # one cosine over both stages
+    assert one.schedule(0) == (1.0, 80) and one.schedule(50) == (1.0, 80) and not one.restarts(30)
+    alone = image_term(scene).stages()  # flow_warmup=0: the images alone, from the peak, nothing to choose from
+    assert [s.name for s in StagePlan(alone).stages] == ["images"] and StagePlan(alone).chooser is None
 
 
 def test_the_image_term_needs_images_and_says_where_to_get_them():
@@ -125,10 +139,12 @@ def test_auto_fits_the_images_where_the_scene_has_them_and_the_flow_where_it_doe
     ideal = DATASETS.build(group(tiny_config(), "data"))
     batches = RayBatcher(ideal, None, 64, "all", 0.0, torch.Generator().manual_seed(0))
     auto = DATA_TERMS.build({"name": "auto", "flow_warmup": 0.0}).setup(ideal, batches, 100)
-    batch = auto.draw(99)
-    assert auto.fitted == "flow" and len(batch.index) == 64
+    (stage,) = auto.stages()  # the flow's deflections for the whole run
+    assert auto.fitted == "flow" and (stage.name, stage.iterations, stage.term) == ("flow", 100, auto.flow)
+    batch = stage.term.draw(99)
+    assert len(batch.index) == 64
     e = {"discrete": torch.zeros(64, 3)}
-    assert torch.equal(auto.terms(e, batch, 99)["discrete"], ideal.observed[batch.index].pow(2).sum(-1).mean())
+    assert torch.equal(stage.term.terms(e, batch, 99)["discrete"], ideal.observed[batch.index].pow(2).sum(-1).mean())
     cfg = tiny_config("train.iterations=2")
     assert "data_term" not in solver(cfg, ideal).labels
 
@@ -263,7 +279,7 @@ def test_the_images_stage_restarts_the_schedule_and_resumes_exactly_within_it(re
                       "train.lr=1e-3", "train.lr_min=1e-6")
     _, scene = realistic
     straight = solver(cfg, scene)
-    assert straight.iterations == 15 and straight.switch == 10
+    assert straight.iterations == 15 and straight.plan.ends == [10, 15]
     rates = []
     for _ in range(15):
         rates.append(straight.optimizer.param_groups[0]["lr"])

@@ -11,8 +11,6 @@ its solvers in :data:`SOLVERS`.
 """
 from __future__ import annotations
 
-import copy
-
 import logging
 import signal
 import threading
@@ -280,22 +278,14 @@ class IterativeSolver:
                                  "same data, or start afresh without train.resume")
         self.load_state_dict(st)
 
-    def snapshot(self) -> dict:
-        """A copy of the whole state (:meth:`state_dict`), for :meth:`restore` after an ensemble's members."""
-        return copy.deepcopy(self.state_dict())
-
-    def restore(self, snapshot: dict) -> None:
-        """Back to the state of :meth:`snapshot`."""
-        self.load_state_dict(snapshot)
-
     trains_members = False  # whether :meth:`member` is implemented
 
-    def member(self, views: list[int], iterations: int, seed: int, lr_factor: float, stop=None,
-               perturb: float = 0.0) -> None:
-        """Become a member of an ensemble (:mod:`nerif.solvers.uncertainty`): the result, perturbed by ``perturb``
-        (a share of its own size), trained on for ``iterations`` more steps on the training ``views`` only, its own
-        random draws from ``seed``, from ``lr_factor`` of its peak learning rate; ``stop()`` true ends it between
-        steps. Solvers that can override it (and set :attr:`trains_members`)."""
+    def member(self, views: list[int], iterations: int, seed: int, lr_factor: float,
+               perturb: float = 0.0) -> "IterativeSolver":
+        """A member of an ensemble (:mod:`nerif.solvers.uncertainty`), a new solver made from this one's result
+        (left as it is): perturbed by ``perturb`` (a share of its own size), to be trained (``train(stop) -> bool``)
+        for ``iterations`` more steps on the training ``views`` only, its own random draws from ``seed``, from
+        ``lr_factor`` of its peak learning rate. Solvers that can override it (and set :attr:`trains_members`)."""
         raise NotImplementedError
 
     def start_from(self, path: Path) -> None:

@@ -74,10 +74,12 @@ class RayBatcher:
         return torch.cat([pool[torch.randint(len(pool), (m,), generator=self.generator, device=device)]
                           for pool, m in parts])
 
-    def of_views(self, views: Sequence[int]) -> "RayBatcher":
-        """The same draws from ``views`` only (scene view indices; an ensemble member that leaves the others out)."""
+    def of_views(self, views: Sequence[int], generator: Optional[torch.Generator] = None) -> "RayBatcher":
+        """The same draws from ``views`` only (scene view indices; an ensemble member that leaves the others out),
+        from ``generator`` where given (else this one's stream)."""
         out = copy.copy(self)
         out.drawn = sorted({int(v) for v in views})
+        out.generator = self.generator if generator is None else generator
         return out
 
     def views(self, iteration: int) -> list[int]:

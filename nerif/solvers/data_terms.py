@@ -5,7 +5,9 @@ background images themselves (``images``), or the images where the data hold the
 A data term draws each iteration's rays (:meth:`draw` -> :class:`RayBatch`) and, given the deflections the
 field renders along them (operator name -> (R, 3) sigma units), returns the misfit per operator
 (:meth:`terms`), in the unit of a squared deflection of sigma for both, so that the other loss weights mean the
-same whichever term is fitted.
+same whichever term is fitted. Once set up it hands the solver its training stages (:meth:`stages`,
+:class:`~nerif.solvers.stages.Stage`): what each stretch of the run fits, for how long, at what rate, and whether
+the held-out views choose between two stages' fields.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ from nerif.registry import Registry
 from nerif.sensing.interpolation import INTERPOLATIONS, interpolation as interpolation_named
 from nerif.sensing.noise import FLOOR as NOISE_FLOOR
 from nerif.solvers.batches import RayBatcher
+from nerif.solvers.stages import Stage
 
 DATA_TERMS = Registry("data term", package="nerif.solvers")
 log = logging.getLogger(__name__)
@@ -78,11 +81,15 @@ class DeflectionTerm:
         self.noise_weighted = bool(noise_weighted)
 
     def setup(self, scene: Scene, batches: RayBatcher, iterations: int, masks=None) -> "DeflectionTerm":
-        self.scene, self.batches = scene, batches
+        self.scene, self.batches, self.iterations = scene, batches, int(iterations)
         self.view_weight = noise_weights(scene) if self.noise_weighted else None  # (V,) or None
         self.ray_weight = (None if self.view_weight is None else  # (N,)
                            self.view_weight.float().to(scene.dirs.device).repeat_interleave(scene.view_counts()))
         return self
+
+    def stages(self) -> list[Stage]:
+        """The flow's deflections for the whole run."""
+        return [Stage("flow", self, self.iterations)]
 
     def draw(self, iteration: int) -> RayBatch:
         return scene_rays(self.scene, self.batches(iteration))
@@ -297,9 +304,18 @@ class ImageTerm(DeflectionTerm):
                     f"{scene.images[0].camera.binning}): raise the binning (data.binning or rig.binning)")
         return ""
 
+    def stages(self) -> list[Stage]:
+        """The flow's deflections for ``flow_iterations`` (:attr:`flow`), then the images for ``image_iterations``
+        from ``image_lr`` of the peak rate (the images first and alone: from the peak), the held-out views choosing
+        between the two stages' fields (``choose_by_heldout``)."""
+        if self.fitted == "flow":
+            return self.flow.stages()
+        warm = self.flow_iterations > 0
+        return [Stage("flow", self.flow, self.flow_iterations),
+                Stage("images", self, self.image_iterations, lr=self.image_lr if warm else 1.0,
+                      choose=warm and self.choose_by_heldout)]
+
     def draw(self, iteration: int) -> RayBatch:
-        if iteration < self.flow_iterations:
-            return self.flow.draw(iteration)
         if not self.at_pixels:
             return scene_rays(self.scene, self.patch[self.batches(iteration)].reshape(-1))
         corners = self.patch[self.batches(iteration)]  # (C, 4)
@@ -310,8 +326,6 @@ class ImageTerm(DeflectionTerm):
         return RayBatch(rays.origins, dirs, rays.index, pixels)
 
     def terms(self, eps: dict, batch: RayBatch, iteration: int) -> dict:
-        if iteration < self.flow_iterations:
-            return self.flow.terms(eps, batch, iteration)
         if batch.pixels is not None:
             return self.pixel_terms(eps, batch)
         s, k = self.scene, self.k

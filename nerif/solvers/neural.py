@@ -2,6 +2,7 @@
 and its steps."""
 from __future__ import annotations
 
+import copy
 import logging
 import math
 import time
@@ -22,6 +23,7 @@ from nerif.renderers.samplers import UniformSampler
 from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_faces
 from nerif.solvers.batches import RayBatcher, check_views_per_batch
 from nerif.solvers.data_terms import DATA_TERMS
+from nerif.solvers.stages import Stage, StagePlan, whose, choose
 
 log = logging.getLogger(__name__)
 
@@ -122,24 +124,18 @@ class NeuralSolver(IterativeSolver):
         self.batches = RayBatcher(scene, masks.inside, self.rays_per_batch, self.views_per_batch,
                                   self.outside_fraction, self.generator)
         self.data_term.setup(scene, self.batches, self.iterations, masks)
-        self.switch, self.restart, self.flow_stage = None, None, None  # the images' stage (data_term=images)
+        self.plan = StagePlan(self.data_term.stages())
+        self.iterations, self.previous = self.plan.iterations, None  # previous: the field the chooser competes with
         if self.data_term.fitted != "flow":
             self.labels["data_term"] = self.data_term.fitted
-            self.switch = int(self.data_term.flow_iterations)
-            self.iterations = self.switch + int(self.data_term.image_iterations)
-            self.restart = self.data_term.image_lr if 0 < self.switch < self.iterations else None
-            self.report["images_from_iteration"] = self.switch  # after the flow's stage
+        for stage, end in zip(self.plan.stages, self.plan.ends):
+            if stage.name != "flow":
+                self.report[f"{stage.name}_from_iteration"] = end - stage.iterations
         rms = float(scene.eps[self.batches.inside()].double().norm(dim=-1).pow(2).mean().sqrt()) / scene.scale
         tv = TotalVariation(scene.box, lc["tv_weight"], lc["tv_points"], rms)
         self.tv = tv if tv.active else None
-        oc = self.optim_cfg
-        fused = self.device.type == "cuda"
-        enc = list(self.field.encoder.parameters())
-        rest = [p for p in self.field.parameters() if all(p is not q for q in enc)]
-        groups = [{"params": rest, "weight_decay": 0.0}] + ([{"params": enc, "weight_decay": self.table_decay}]
-                                                            if enc else []) + self.data_term.parameter_groups()
-        self.optimizer = torch.optim.AdamW(groups, lr=oc["lr"], betas=tuple(oc["betas"]), eps=oc["eps"], fused=fused)
-        self.scheduler = self._schedule(0)
+        self.optimizer = self._optimizer()
+        self.scheduler = self.plan.cosine(self.optimizer, 0, self.optim_cfg["lr_min"])
         if self.init_volume is not None:
             self._warm_start(self.init_volume)
         self.average = averaged_field(self.field, self.ema_decay, self.rate) if self.ema_decay > 0 else None
@@ -152,133 +148,103 @@ class NeuralSolver(IterativeSolver):
         self._eval_sampler = UniformSampler(self.sampler.samples_per_ray, jitter=False)
         return self
 
-    def _schedule(self, iteration: int) -> torch.optim.lr_scheduler.CosineAnnealingLR:
-        """The cosine annealing of the stage that holds ``iteration``, from its peak (``train.lr``; the images'
-        stage: ``data_term.image_lr`` of it where it restarts the schedule) down to ``train.lr_min``."""
-        stage, length = self._stage(iteration)
-        factor = self.restart if stage == 1 else 1.0
-        for g in self.optimizer.param_groups:
-            g.setdefault("peak_lr", g["lr"])
-            g["lr"] = g["initial_lr"] = g["peak_lr"] * factor
-        return torch.optim.lr_scheduler.CosineAnnealingLR(self.optimizer, T_max=length, eta_min=self.optim_cfg["lr_min"])
+    def _optimizer(self) -> torch.optim.AdamW:
+        """AdamW on the field (the encoder's tables with ``train.table_decay``, the rest without) and the data
+        term's own parameters, at ``train.lr``."""
+        oc = self.optim_cfg
+        enc = list(self.field.encoder.parameters())
+        rest = [p for p in self.field.parameters() if all(p is not q for q in enc)]
+        groups = [{"params": rest, "weight_decay": 0.0}] + ([{"params": enc, "weight_decay": self.table_decay}]
+                                                            if enc else []) + self.data_term.parameter_groups()
+        return torch.optim.AdamW(groups, lr=oc["lr"], betas=tuple(oc["betas"]), eps=oc["eps"],
+                                 fused=self.device.type == "cuda")
 
-    def _stage(self, iteration: int) -> tuple[int, int]:
-        """(0 or 1, its length in iterations): the stage of the learning-rate schedule that holds ``iteration``
-        (1: the images' stage, where it restarts the schedule)."""
-        if self.restart is None:
-            return 0, self.iterations
-        return (0, self.switch) if iteration < self.switch else (1, self.iterations - self.switch)
-
-    def _end_of_flow_stage(self) -> None:
-        """At the switch from the flow to the images: the flow's field and what it leaves of the held-out views
-        (what the images' field must beat), and the images' learning-rate schedule where it restarts."""
-        if self.data_term.choose_by_heldout and self.scene.heldout is not None:
+    def _end_of_stage(self) -> None:
+        """Where a stage ends and another begins: the field it leaves and what that leaves of the held-out views,
+        where the last stage's field will compete with it; the next stage's learning-rate schedule where it starts
+        one of its own."""
+        ending = self.plan.ending(self.iteration)
+        if ending is None:
+            return
+        if ending is self.plan.before_chooser and self.scene.heldout is not None:
             weights = {k: v.detach().clone() for k, v in self.estimate.state_dict().items()}
-            self.flow_stage = {"weights": weights, "figures": self._stage_figures()}
-        if self.restart is not None:
-            self.scheduler = self._schedule(self.iteration)
+            self.previous = {"weights": weights, "figures": self.evaluation.stage_figures(
+                self.predict, self.reconstruction, self.data_term)}
+        if self.plan.restarts(self.iteration):
+            self.scheduler = self.plan.cosine(self.optimizer, self.iteration, self.optim_cfg["lr_min"])
 
     def choose_by_heldout(self) -> Optional[str]:
-        """After the images' stage: the field the held-out views prefer. Keeps the images' field where it explains
-        the held-out views' images better than the flow's did (``heldout_image_misfit``: their residual as the image
-        term models it), or where they hold no images their measured displacements
-        (:meth:`Evaluation.heldout_misfit`), else puts the flow's field back; says which in the log and in
-        :attr:`report` (``data_term_kept``, ``chosen_by``, and ``flow_stage``, ``images_stage``: each field's
-        :meth:`_stage_figures`) and returns the one it kept (None where nothing was chosen: no images' stage, no
-        held-out view, or not finished). The held-out displacements are the flow's, with the flow's bias: over 26 runs
-        of the 13 independent captures (two seeds) they chose the field the truth prefers in 22, the held-out images
-        in 26 (the B-spline's runs) and 25 (the band-limited picture's; the one miss a tie, issue 56)."""
-        if (not self.switch or self.iteration < self.iterations or "data_term_kept" in self.report
-                or not self.data_term.choose_by_heldout):  # no flow's stage (flow_warmup=0): nothing to choose from
+        """At the end of a run whose last stage chooses (:attr:`Stage.choose`; the images' after the flow's): keeps
+        the field the held-out views prefer (:func:`nerif.solvers.stages.choose`), putting back the one the stage
+        before it left where that one explains them better; records the choice in :attr:`report` and returns the
+        name of the stage whose field it kept (None where nothing was chosen: no such stage, no held-out view, or
+        not finished)."""
+        last, before = self.plan.chooser, self.plan.before_chooser
+        if last is None or self.iteration < self.iterations or "data_term_kept" in self.report:
             return None
-        if self.flow_stage is None:
-            log.info("data_term=images: no held-out view to choose between the flow's and the images' fields by; "
-                     "the images' is kept")
+        if self.previous is None:
+            log.info("data_term=images: no held-out view to choose between the %s and the %s fields by; the %s is "
+                     "kept", whose(before.name), whose(last.name), whose(last.name))
             return None
-        figures = self._stage_figures()
-        key = "heldout_image_misfit" if "heldout_image_misfit" in figures else "heldout_misfit"
-        flow, images = self.flow_stage["figures"][key], figures[key]
-        kept = "images" if images < flow else "flow"
-        unit, what = ((" (of the full range)", "images") if key == "heldout_image_misfit" else
-                      (" px" if self.evaluation.physical else " (sigma)", "displacements"))
-        self.report.update(data_term_kept=kept, chosen_by=f"held-out {what}", flow_stage=self.flow_stage["figures"],
-                           images_stage=figures)
-        if kept == "flow":
-            self.estimate.load_state_dict(self.flow_stage["weights"])
-            self.field.load_state_dict(self.flow_stage["weights"])
-            log.info("data_term=images: the images' field explains the held-out views worse than the flow's "
-                     "(%.4g against %.4g%s RMS of their %s): the flow's field is kept "
-                     "(data_term.choose_by_heldout=false keeps the images')", images, flow, unit, what)
-        else:
-            log.info("data_term=images: the images' field explains the held-out views better than the flow's (%.4g "
-                     "against %.4g%s RMS of their %s) and is kept", images, flow, unit, what)
+        figures = self.evaluation.stage_figures(self.predict, self.reconstruction, self.data_term)
+        kept, report = choose(before, last, self.previous["figures"], figures, self.evaluation.physical)
+        self.report.update(report)
+        if kept == before.name:
+            self.estimate.load_state_dict(self.previous["weights"])
+            self.field.load_state_dict(self.previous["weights"])
         return kept
 
-    def _stage_figures(self) -> dict:
-        """What the field now leaves of the held-out views (``heldout_misfit``: :meth:`Evaluation.heldout_misfit`,
-        and the held-out image residual where the scene holds images), every held-out ray rendered once, and where
-        a truth is known its errors (:meth:`Evaluation.field_errors`): for ``metrics.json``, so that the flow's and
-        the images' fields can be compared."""
-        ev, h = self.evaluation, self.scene.heldout
-        index = torch.arange(len(h.dirs), device=h.dirs.device)
-        pred = ev.heldout_predictions(self.predict, index)
-        out = {"heldout_misfit": ev.heldout_misfit(self.predict, pred)}
-        if h.image_block() is not None:  # the same field against the held-out images themselves
-            out["heldout_photometric_rmse"] = ev.photometric_rmse(index, pred)
-            term = self.data_term  # and as the image term compares them: what chooses between the fields
-            if getattr(term, "read", None) is not None:
-                out["heldout_image_misfit"] = ev.photometric_rmse(index, pred, term.read, term.highpass_px,
-                                                                  term.lowpass_px)
-        if self.scene.truth_T is not None:
-            out.update(ev.field_errors(self.reconstruction()))
-        return out
-
     def fit(self, **kwargs) -> dict:
-        """:meth:`IterativeSolver.fit`, then the held-out views' choice between the flow's and the images' fields
-        (:meth:`choose_by_heldout`); where they keep the flow's, the last evaluation and the checkpoint are of it."""
+        """:meth:`IterativeSolver.fit`, then the held-out views' choice between the last two stages' fields
+        (:meth:`choose_by_heldout`); where they keep the earlier one, the last evaluation and the checkpoint are of
+        it."""
         last = super().fit(**kwargs)
-        if self.choose_by_heldout() == "flow":
+        chooser = self.plan.chooser
+        if chooser is not None and self.choose_by_heldout() not in (None, chooser.name):
             self.history.pop()
             last = self.evaluate()
             if kwargs.get("checkpoint") is not None and kwargs.get("checkpoint_at_end", True):
                 self.checkpoint(kwargs["checkpoint"])
         return last
 
-    def member(self, views: list[int], iterations: int, seed: int, lr_factor: float, stop=None,
-               perturb: float = 0.0) -> None:
-        """An ensemble member: the field evaluations use (the kept one), its encoder's tables perturbed by Gaussian
-        noise of ``perturb`` times each table's RMS (what the data pin down is pulled back by the training, what
-        they leave free stays perturbed), trained on for ``iterations`` more steps on the observed deflections (the
-        flow's term, noise-weighted as set) of the training ``views`` only, with a fresh optimiser and cosine
-        schedule from ``lr_factor`` of each group's peak rate, a fresh average and its own random draws (``seed``);
-        ``stop()`` true ends it between steps. :meth:`restore` undoes it."""
-        self._kept = getattr(self, "_kept", None) or (self.data_term, self.switch)
-        self.field.load_state_dict({k: v.detach().clone() for k, v in self.estimate.state_dict().items()})
-        self.generator.manual_seed(int(seed))
+    def member(self, views: list[int], iterations: int, seed: int, lr_factor: float,
+               perturb: float = 0.0) -> "NeuralSolver":
+        """An ensemble's member, a new solver made from this one's trained state (which it leaves as it is): the
+        field evaluations use (the kept one), its encoder's tables perturbed by Gaussian noise of ``perturb`` times
+        each table's RMS (what the data pin down is pulled back by the training, what they leave free stays
+        perturbed), to be trained (:meth:`train`) for ``iterations`` more steps on the observed deflections (the
+        flow's term, noise-weighted as set) of the training ``views`` only, with its own optimiser, cosine schedule
+        from ``lr_factor`` of each group's peak rate, average and random draws (``seed``). The scene, masks and
+        evaluation are shared, read only: members can train side by side."""
+        m = copy.copy(self)
+        m.field = copy.deepcopy(self.field)
+        m.field.load_state_dict({k: v.detach().clone() for k, v in self.estimate.state_dict().items()})
+        m.sampler = copy.deepcopy(self.sampler)
+        m.generator = torch.Generator(self.device).manual_seed(int(seed))
         if perturb > 0:
             with torch.no_grad():
-                for p in self.field.encoder.parameters():
-                    noise = torch.randn(p.shape, generator=self.generator, device=p.device, dtype=p.dtype)
+                for p in m.field.encoder.parameters():
+                    noise = torch.randn(p.shape, generator=m.generator, device=p.device, dtype=p.dtype)
                     p.add_(noise * (perturb * p.pow(2).mean().sqrt()))
-        flow = getattr(self._kept[0], "flow", self._kept[0])  # the image term's own flow term, or the flow term
+        flow = getattr(self.data_term, "flow", self.data_term)  # the image term's own flow term, or the flow term
         term = DATA_TERMS.build({"name": "flow", "noise_weighted": flow.noise_weighted})
-        self.data_term, self.switch = term.setup(self.scene, self.batches.of_views(views), iterations), None
-        self.optimizer.state.clear()
-        for g in self.optimizer.param_groups:
-            g["lr"] = g["initial_lr"] = g.setdefault("peak_lr", g["lr"]) * lr_factor
-        self.scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(self.optimizer, T_max=iterations,
-                                                                    eta_min=self.optim_cfg["lr_min"])
-        if self.average is not None:
-            self.average = averaged_field(self.field, self.ema_decay, self.rate)
-        for _ in range(iterations):
-            if stop is not None and stop():
-                return
-            self.step()
+        m.data_term = term.setup(self.scene, self.batches.of_views(views, m.generator), iterations)
+        m.plan = StagePlan([Stage("flow", m.data_term, iterations, lr=lr_factor)], start=self.iteration)
+        m.iterations, m.previous = m.plan.iterations, None
+        m.optimizer = m._optimizer()
+        m.scheduler = m.plan.cosine(m.optimizer, m.iteration, self.optim_cfg["lr_min"])
+        m.average = averaged_field(m.field, self.ema_decay, m.rate) if self.average is not None else None
+        m.history, m.step_times, m.report, m.labels = [], [], {}, dict(self.labels)
+        return m
 
-    def restore(self, snapshot: dict) -> None:
-        if getattr(self, "_kept", None) is not None:
-            (self.data_term, self.switch), self._kept = self._kept, None
-        super().restore(snapshot)
+    def train(self, stop=None) -> bool:
+        """Steps to :attr:`iterations` without evaluations or checkpoints (an ensemble's member); ``stop()`` true ends
+        it between steps. Returns whether it ran to the end."""
+        while self.iteration < self.iterations:
+            if stop is not None and stop():
+                return False
+            self.step()
+        return True
 
     def _warm_start(self, path: str) -> None:
         """Fit the field to the sigma volume of ``path`` (a ``reconstruction.npz`` of any solver on this probe
@@ -316,12 +282,13 @@ class NeuralSolver(IterativeSolver):
         """One iteration on the next views (:meth:`RayBatcher.views`); returns the loss terms (floats)."""
         t0 = time.perf_counter()
         self.sampler.update(self.scene.box, self.occupancy_value, self.iteration, self.generator)
-        batch = self.data_term.draw(self.iteration)
+        stage = self.plan.at(self.iteration)
+        batch = stage.term.draw(self.iteration)
         samples = self.sampler(self.scene.box, batch.origins, batch.dirs, self.generator)
         trained = {name: True for name, w in self.weights.items() if w > 0}
         eps = render_deflections(self.field, samples, trained, self.step_mm, dirs=self._measured(batch.dirs),
                                  stencil=self.stencil)
-        terms = self.data_term.terms(eps, batch, self.iteration)
+        terms = stage.term.terms(eps, batch, self.iteration)
         loss = weighted_sum(terms, self.weights)
         boundary = self.boundary(self.field, self.generator) if self.boundary is not None else None
         if boundary is not None:
@@ -349,8 +316,7 @@ class NeuralSolver(IterativeSolver):
         if self.average is not None:
             self.average.update_parameters(self.field)
         self._timed(time.perf_counter() - t0)
-        if self.iteration == self.switch:
-            self._end_of_flow_stage()
+        self._end_of_stage()
         self.samples_seen += len(samples.positions)
         self.rays_seen += samples.n_rays
         self.samples_max = max(self.samples_max, int(stats[-2]))
@@ -441,7 +407,7 @@ class NeuralSolver(IterativeSolver):
                 "sampler": self.sampler.state_dict(), "scheduler": self.scheduler.state_dict(),
                 "generator": self.generator.get_state(), "samples_seen": self.samples_seen, "rays_seen": self.rays_seen,
                 "samples_max": self.samples_max, "rays_skipped": self.rays_skipped, "converged": self.converged,
-                "data_term": self.data_term.state_dict(), "flow_stage": self.flow_stage}
+                "data_term": self.data_term.state_dict(), "previous_stage": self.previous}
 
     def _load_field(self, st: dict, weights: Optional[dict] = None) -> None:
         try:
@@ -477,17 +443,9 @@ class NeuralSolver(IterativeSolver):
         except ValueError as e:
             raise ValueError("the checkpoint's optimiser state does not fit this solver (made by a nerif before "
                              f"train.table_decay, or with another encoder): {str(e).splitlines()[0]}") from None
-        self.flow_stage = st.get("flow_stage")
+        self.previous = st.get("previous_stage", st.get("flow_stage"))
         self.scheduler.load_state_dict(st["scheduler"])
-        planned, length = self.scheduler.T_max, self._stage(int(st["iteration"]))[1]
-        if planned != length:  # train.iterations changed on resume: the schedule as if planned so from the start
-            sch, t = self.scheduler, self.scheduler.last_epoch
-            sch.T_max = length
-            for g, base in zip(self.optimizer.param_groups, sch.base_lrs):
-                g["lr"] = sch.eta_min + (base - sch.eta_min) * (1 + math.cos(math.pi * min(t, sch.T_max) / sch.T_max)) / 2
-            sch._last_lr = [g["lr"] for g in self.optimizer.param_groups]
-            log.info("the cosine learning-rate schedule, planned for %d iterations, now runs to %d: at iteration %d its "
-                     "rate is %.3g", planned, self.iterations, t, self.optimizer.param_groups[0]["lr"])
+        self.plan.replan(self.scheduler, self.optimizer, int(st["iteration"]))
         if self.average is not None:
             if st.get("average") is not None:
                 self.average.load_state_dict(st["average"])

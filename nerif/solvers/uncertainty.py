@@ -94,28 +94,25 @@ class ViewEnsemble:
                              f"{n_views} training views; leave out fewer")
 
     def __call__(self, solver, stop=None) -> dict:
-        """The uncertainty of ``solver``'s trained result (the solver is left as it was); ``stop()`` true (a signal)
-        ends it between steps and returns nothing."""
+        """The uncertainty of ``solver``'s trained result (the solver is left as it was: each member is a new solver,
+        :meth:`~nerif.solvers.neural.NeuralSolver.member`); ``stop()`` true (a signal) ends it between steps and
+        returns nothing."""
         scene = solver.scene
         t0 = time.perf_counter()
         iterations = max(1, int(round(self.fraction * solver.iteration)))  # of those run (a run may stop early)
-        kept = solver.snapshot()
         held = scene.heldout is not None and len(scene.heldout.dirs) > 0
         left = left_out_views(scene.n_views, self.members, self.leave_out)
         fields, held_pred = [], []
-        try:
-            for k, out in enumerate(left):
-                solver.member([v for v in range(scene.n_views) if v not in out], iterations, self.seed + k,
-                              self.lr_factor, stop, self.perturb)
-                if stop is not None and stop():
-                    return {}
-                fields.append(solver.reconstruction())
-                if held:
-                    held_pred.append(heldout_fit(solver))
-                log.info("uncertainty: member %d of %d (without %s) trained for %d iterations", k + 1, self.members,
-                         ", ".join(scene.cameras[v].name for v in out), iterations)
-        finally:
-            solver.restore(kept)
+        for k, out in enumerate(left):
+            member = solver.member([v for v in range(scene.n_views) if v not in out], iterations, self.seed + k,
+                                   self.lr_factor, self.perturb)
+            if not member.train(stop):
+                return {}
+            fields.append(member.reconstruction())
+            if held:
+                held_pred.append(heldout_fit(member))
+            log.info("uncertainty: member %d of %d (without %s) trained for %d iterations", k + 1, self.members,
+                     ", ".join(scene.cameras[v].name for v in out), iterations)
         spread = np.std(np.stack(fields), axis=0, ddof=1)
         if held:
             factor, source = calibration(heldout_fit(solver), torch.stack(held_pred), scene.heldout.observed), \
