@@ -20,7 +20,7 @@ import torch
 
 from nerif.app import run
 from nerif.configs import compose
-from nerif.io.export import atomic_write, write_json
+from nerif.export import atomic_write, write_json
 from nerif.io.summary import COLUMNS, write_tables
 
 DEFAULT_CELLS = [f"encoder={e} grad={g}" for e in ("none", "frequency", "hash") for g in ("auto", "discrete", "hybrid")]

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ablation import header, run_cells
 
-from nerif.io.export import atomic_write, write_json
+from nerif.export import atomic_write, write_json
 from nerif.io.plots import plt, save_figure
 
 # Measured displacements carry no along-ray component; on Phantom 5, which the box cuts, the 3-D gate then

@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ablation import header, run_cells, time_to, write_report  # noqa: E402
 
 from nerif.data.families import FAMILIES, write_dataset  # noqa: E402
-from nerif.io.export import write_json  # noqa: E402
+from nerif.export import write_json  # noqa: E402
 from nerif.metrics import select_by_heldout  # noqa: E402
 
 CGLS = "solver=cgls solver.iterations=200 solver.eval_every=10"
@@ -122,7 +122,7 @@ def plot(scenes: dict[str, dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from nerif.io.export import atomic_write
+    from nerif.export import atomic_write
 
     n = len(scenes)
     cols = min(n, 4)

@@ -15,7 +15,7 @@ from pathlib import Path
 import torch
 
 from nerif.encoders.hash import HashGrid
-from nerif.io.export import write_json
+from nerif.export import write_json
 
 
 def main() -> None:

@@ -17,7 +17,7 @@ import numpy as np
 
 from ablation import header, run_cells
 from nerif.data.transforms import reference_mask3d
-from nerif.io.export import write_json
+from nerif.export import write_json
 from nerif.geometry import ProbeBox
 from nerif.io.summary import write_tables
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from nerif.io.export import write_json
+from nerif.export import write_json
 from nerif.io.plots import plt, save_figure
 
 CELLS = "noise_0,noise_1e-4,noise_1e-3,noise_1e-2,f_8,f_16,f_64"

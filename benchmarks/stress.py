@@ -25,7 +25,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from ablation import write_report  # noqa: E402
-from nerif.reconstruct import ill_posed  # noqa: E402
+from nerif.data.diagnostics import ill_posed  # noqa: E402
 from nerif.configs import compose, group  # noqa: E402
 from nerif.data import DATASETS  # noqa: E402
 from nerif.masks import MASKS  # noqa: E402

@@ -31,7 +31,7 @@ from independent import capture_overrides  # noqa: E402
 from same_figures import REPO  # noqa: E402
 
 from nerif.data.families import FAMILIES, write_dataset  # noqa: E402
-from nerif.io.export import write_json  # noqa: E402
+from nerif.export import write_json  # noqa: E402
 
 KEYS = ("uncertainty_coverage_1sigma", "uncertainty_coverage_2sigma", "uncertainty_coverage_2sigma_core",
         "uncertainty_ause", "uncertainty_spearman", "sigma_relative_error", "uncertainty_scale",

@@ -15,7 +15,7 @@ from omegaconf import DictConfig
 
 from nerif.app import run, unexpected
 from nerif.configs import check_kinds, config_dir, group_choices, unknown_override
-from nerif.io.export import write_json
+from nerif.export import write_json
 from nerif.io.summary import FAILED
 from nerif.solvers import DivergenceError, Interrupted
 

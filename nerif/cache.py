@@ -19,7 +19,7 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-from nerif.io.export import write_npz
+from nerif.export import write_npz
 
 log = logging.getLogger(__name__)
 DEFAULT_MAX_MB = 2048.0

@@ -16,7 +16,7 @@ import torch
 from nerif.data import Scene
 from nerif.data.observation import observations
 from nerif.losses.images import bandpass, photometric_residual
-from nerif.metrics import deflection_rmse, flame_region, psnr_db, rmse, value_range
+from nerif.metrics import deflection_rmse, explained_share, flame_region, psnr_db, rmse, value_range
 from nerif.sensing.interpolation import Bicubic, Interpolation
 
 READ = Bicubic()  # how the held-out image residual reads the reference (a monitored figure, kept as it was)
@@ -110,7 +110,11 @@ class Evaluation:
         """Errors on the held-out views (empty without any): deflection RMSE [rad] and PSNR [dB] of predicted
         against observed deflections and, where deflections are physical, the same for the image displacements
         [px], and where the scene holds images the photometric residual (``photometric``). On the fixed held-out rays,
-        or on ``every`` held-out ray (``pred``: their predictions [rad] when already computed)."""
+        or on ``every`` held-out ray (``pred``: their predictions [rad] when already computed), where also what no
+        flame would leave (``_none``) and the share of the held-out displacements the fit explains
+        (``heldout_explained``, :func:`nerif.metrics.explained_share`: the quality figure a user without a truth
+        can read; near 1 where fit and data agree, falling as the data get noisier or the views disagree, below 0
+        for a failed fit)."""
         h = self.scene.heldout
         if h is None:
             return {}
@@ -124,9 +128,11 @@ class Evaluation:
             u_obs = self.heldout_displacements[index]
             m.update(heldout_displacement_rmse_px=deflection_rmse(u_pred, u_obs),
                      heldout_displacement_psnr_db=psnr_db(u_pred, u_obs, self.peaks["displacement"]))
-            if every:  # what no flame at all leaves
-                m["heldout_displacement_rmse_px_none"] = deflection_rmse(torch.zeros_like(u_obs), u_obs)
-        if photometric and h.image_block() is not None:
+            if every:  # what no flame at all leaves, and the share of the displacements the fit explains
+                none = m["heldout_displacement_rmse_px_none"] = deflection_rmse(torch.zeros_like(u_obs), u_obs)
+                if none:
+                    m["heldout_explained"] = explained_share(m["heldout_displacement_rmse_px"], none)
+        if photometric and not h.lacks_image_model():
             m["heldout_photometric_rmse"] = self.photometric_rmse(index, pred)
             if every:  # what the flow's displacements and none leave, for comparison
                 m["heldout_photometric_rmse_flow"] = self.photometric_rmse(index, obs)
@@ -164,7 +170,7 @@ class Evaluation:
         index = torch.arange(len(h.dirs), device=h.dirs.device)
         pred = self.heldout_predictions(predict, index)
         out = {"heldout_misfit": self.heldout_misfit(predict, pred)}
-        if h.image_block() is not None:  # the same field against the held-out images themselves
+        if not h.lacks_image_model():  # the same field against the held-out images themselves
             out["heldout_photometric_rmse"] = self.photometric_rmse(index, pred)
             if getattr(term, "read", None) is not None:  # and as the image term compares them
                 out["heldout_image_misfit"] = self.photometric_rmse(index, pred, term.read, term.highpass_px,

@@ -83,7 +83,7 @@ def main(argv=None) -> dict:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     out = args.out or Path(f"{args.distorted.stem}_measured")
     try:
-        from nerif.io.export import write_json, write_npz
+        from nerif.export import write_json, write_npz
         from nerif.io.plots import measured_figure, save_figure
         from nerif.sensing.flow import FLOW
         from nerif.sensing.measurement import CAUSES

@@ -107,3 +107,10 @@ def temperature_figures(T: np.ndarray, axes: list, hot_K: float, T_true: np.ndar
         out.update(of(T_true, "_true"))
         out["T_peak_error_K"] = out["T_peak_K"] - out["T_peak_true_K"]
     return out
+
+
+def explained_share(fit_rmse: float, none_rmse: float) -> float:
+    """The share of measured values (their mean square) a fit explains, ``1 - (fit_rmse / none_rmse)^2``: 1 for a
+    perfect fit, 0 for one no better than zero, below 0 for a worse one; ``none_rmse`` the RMS of the values
+    themselves (what no fit leaves), positive."""
+    return float(1.0 - (fit_rmse / none_rmse) ** 2)

@@ -15,8 +15,8 @@ from omegaconf import DictConfig
 
 from nerif.configs import group
 from nerif.data import DATASETS
-from nerif.data.scene import hot_evidence, view_directions, view_span_deg
-from nerif.io.export import write_json
+from nerif.data.diagnostics import check_sign, ill_posed
+from nerif.export import write_json
 from nerif.io.outputs import RESULTS, summary_line, volume_slices, write_masks, write_outputs, write_sensing
 from nerif.io.units import metric_units
 from nerif.masks import MASKS
@@ -196,52 +196,3 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
     if received:
         raise Interrupted(received[0])
     return metrics
-
-
-def check_sign(scene, prior) -> list[str]:
-    """One sentence where the deflections show gas colder than ambient (:func:`nerif.data.scene.hot_evidence`
-    above 0.2). Where most views agree on it, a flame is hotter, so the reference and distorted images look
-    swapped (or the deflections' sign reversed); where the views disagree, the measurement of those views is what
-    fails (a flow thrown off by the flame's own light, a shaking camera, an occluder), and the sentence names them.
-    Refused unless ``field.prior`` was set (a field that may be colder than ambient: then a warning, returned for
-    ``metrics.json``)."""
-    evidence = hot_evidence(scene)
-    if evidence <= 0.2:
-        return []
-    per_view = hot_evidence(scene, per_view=True)
-    cold = [cam.name for cam, e in zip(scene.cameras, per_view) if e > 0.2]
-    hot = [cam.name for cam, e in zip(scene.cameras, per_view) if e < -0.2]
-    seen = f"the deflections point the way gas colder than ambient bends light (hot evidence {evidence:+.2f}; a " \
-           "flame gives -0.3 to -1)"
-    if len(hot) >= max(1, len(scene.cameras) // 3):
-        msg = (f"{seen}, but the views disagree: {', '.join(cold)} show cold gas, {', '.join(hot)} a hot flame; "
-               "the displacements of the first look wrong (the flow thrown off by the flame's own light, a "
-               "shaking camera, an object in front of the background?): look at their images and the log's "
-               "measurement lines")
-        fix = "leave those views out (data.heldout) or fix their images"
-    else:
-        swapped = scene.images is not None
-        msg = f"{seen} in {len(cold)} of {len(scene.cameras)} views: " + (
-            "the reference and distorted images look swapped" if swapped else "their sign looks reversed")
-        fix = "swap them" if swapped else "check the data"
-    if prior is None:
-        raise ValueError(f"{msg}; {fix}, or for gas that is colder than ambient set field.prior=[a, b] with b above "
-                         "its coldest sigma")
-    log.warning("%s", msg)
-    return [msg]
-
-
-def ill_posed(scene) -> list[str]:
-    """Warnings (logged, and returned for ``metrics.json``) where the data cannot fix a 3-D field."""
-    n = view_directions(scene.cameras)
-    if n < 3:
-        msg = (f"ill-posed: the {scene.n_views} training view(s) look along only {n} distinct direction(s); a 3-D "
-               "field needs at least 3, and the reconstruction is not to be trusted away from what they see")
-    elif (span := view_span_deg(scene.cameras)) < 30.0:
-        msg = (f"ill-posed: the {scene.n_views} training views span only {span:.1f} degrees of viewing directions; "
-               "tomography needs a wide spread (30 degrees at least), and the reconstruction is not to be trusted"
-               + (" (were the angles given in radians? angles_deg takes degrees)" if span < 6.5 else ""))
-    else:
-        return []
-    log.warning("%s", msg)
-    return [msg]

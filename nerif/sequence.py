@@ -28,7 +28,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from nerif.data.frames import FRAMES, Frame
 from nerif.geometry import ProbeBox
-from nerif.io.export import write_json, write_pvd
+from nerif.export import write_json, write_pvd
 from nerif.io.outputs import summary_line
 from nerif.io.units import metric_units
 from nerif.io.plots import save_figure, sequence_figure, slice_figure

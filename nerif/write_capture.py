@@ -30,7 +30,7 @@ from nerif.sequence import frames_of
 from nerif.data.rig_file import RIG_FILE, RIG_VERSION, read_rig
 from nerif.data.scene import Scene
 from nerif.geometry import Camera
-from nerif.io.export import atomic_write, write_npz, write_png
+from nerif.export import atomic_write, write_npz, write_png
 from nerif.io.units import VOLUMES
 from nerif.sensing.optics import probe_distance_mm
 

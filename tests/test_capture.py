@@ -175,7 +175,7 @@ def test_bad_capture_folders(written, tmp_path, monkeypatch, edit_rig, edit_file
 
 def test_swapped_reference_and_distorted_images_are_refused_before_training(written, tmp_path):
     """Issue 28: swapped images gave a field pinned at the cold bound, 419 K off, without a word."""
-    from nerif.data.scene import hot_evidence
+    from nerif.data.diagnostics import hot_evidence
 
     def swap(rig):
         v = rig["views"]

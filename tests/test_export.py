@@ -6,7 +6,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from nerif.io.export import atomic_write, write_json, write_vti
+from nerif.export import atomic_write, write_json, write_vti
 
 
 def test_vti_holds_the_volume_x_fastest(tmp_path):
@@ -26,7 +26,7 @@ def test_the_volumes_say_their_units_in_vti_field_data_and_npz(tmp_path):
     and an ``units`` entry of the ``.npz``."""
     import json
 
-    from nerif.io.export import write_npz
+    from nerif.export import write_npz
     from nerif.io.units import VOLUMES
 
     vol = np.zeros((2, 3, 4))
@@ -69,7 +69,7 @@ def test_written_files_get_the_usual_permissions_not_the_temporary_files_private
 
 
 def test_pvd_lists_each_dataset_with_its_time(tmp_path):
-    from nerif.io.export import write_pvd
+    from nerif.export import write_pvd
 
     path = write_pvd(tmp_path / "s.pvd", [(0.0, "frame_0000/reconstruction.vti"), (0.004, "frame_0001/reconstruction.vti")])
     root = ET.parse(path).getroot()

@@ -36,7 +36,7 @@ def test_the_sign_check_says_swapped_only_when_the_views_agree():
     import pytest
 
     from nerif.data import DATASETS
-    from nerif.reconstruct import check_sign
+    from nerif.data.diagnostics import check_sign
 
     scene = DATASETS.build({"name": "synthetic", "render_supersample": 1, "sensing": "perpendicular",
                             "phantom": {"name": "gaussian_blob", "shape": [16, 16, 16], "voxel_mm": 2.0,

@@ -106,7 +106,7 @@ def test_deflection_noise_has_the_asked_rms_and_is_perpendicular_when_only_that_
 
 
 def test_distinct_view_directions():
-    from nerif.data.scene import view_directions
+    from nerif.data.diagnostics import view_directions
     from nerif.geometry.camera import arc_rig
 
     assert view_directions(arc_rig(n_cameras=12)) == 12

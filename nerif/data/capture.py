@@ -24,7 +24,7 @@ from nerif.data.capture_images import capture_files, check_images, lossy_images,
 from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest, resolve_binning
 from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.rig_file import RigFile, read_rig
-from nerif.data.view_check import screened
+from nerif.data.diagnostics import screened
 from nerif.data.scene import (DATASETS, Scene, ViewImages, found_per_view, heldout_views,
                               scene_from_displacements)
 from nerif.geometry import Camera, outside_the_box, rays_in_box

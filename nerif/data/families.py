@@ -31,7 +31,7 @@ from nerif.data.phantoms import lifted_jet_profile, phantom5_temperature
 from nerif.data.synthetic import with_noise
 from nerif.data.transforms import write_split
 from nerif.geometry import ProbeBox, arc_rig, rays_in_box, view_index
-from nerif.io.export import atomic_write
+from nerif.export import atomic_write
 from nerif.physics import Ambient
 from nerif.renderers.deflection import perpendicular
 

@@ -220,6 +220,22 @@ class Scene:
         b, rest = next(iter(blocks))
         return b if len(blocks) == 1 and not rest and b >= 1 else None
 
+    def lacks_image_model(self, min_block: int = 1, one_size: bool = False) -> str:
+        """What the scene lacks for its images to be modelled (the image term, unified BOS, the held-out image
+        residual: the one place this is asked), "" where nothing: its background images, or rays a whole number of
+        image pixels apart (at least ``min_block``), the same for every view (and images of one size, where
+        ``one_size``: the image term stacks them)."""
+        if self.images is None:
+            return "the background images, which these data do not have"
+        b = self.image_block()
+        sizes = len({im.reference.shape for im in self.images})
+        if b is None or b < min_block or (one_size and sizes > 1):
+            least = f" (at least {min_block})" if min_block > 1 else ""
+            return (f"every view's rays a whole number{least} of image pixels apart, the same for all"
+                    + (", on images of one size" if one_size else "") + f" (rays binned {self.cameras[0].binning}, "
+                    f"images {self.images[0].camera.binning}): raise the binning (data.binning or rig.binning)")
+        return ""
+
     def shake_px(self) -> torch.Tensor:
         """(V, 2) float64: each view's rigid image shift between the exposures the measurement stage found and took
         off its displacements [px of the full sensor] (zeros where none was measured). The images still hold it:
@@ -287,7 +303,7 @@ def _gathered(rays: tuple, images: list[np.ndarray], valid: list[np.ndarray], ca
     """Per-pixel ``images`` (per view, (height, width, C)) at each ray of ``rays`` (origins, dirs, pixel,
     view_start), and the rays kept: those whose pixel is ``valid`` with finite values; one sentence for a view left
     with no ray (``measured``: only for a view with no ray through the box at all; one whose measurement left none
-    is kept empty, for :mod:`nerif.data.view_check` to name and leave out). Returns (origins, dirs, values (N, C),
+    is kept empty, for :mod:`nerif.data.diagnostics` to name and leave out). Returns (origins, dirs, values (N, C),
     pixel, view_start) of the kept rays."""
     origins, dirs, pixel, view_start = rays
     crossing = view_start.diff().tolist()
@@ -360,52 +376,6 @@ def scene_from_displacements(box: ProbeBox, ambient: Ambient, cameras: list[Came
                      measured_px=list(displacements) if left_out is not None else None, left_out=left_out)
     return Scene(box=box, ambient=ambient, views=views, origins=origins, dirs=dirs, eps=eps.float(), pixel=pixel,
                  view_start=view_start, perpendicular_only=True, displacements=u.float(), **fields)
-
-
-def hot_evidence(scene: Scene, per_view: bool = False):
-    """How clearly the observed deflections show gas hotter (less refractive) than ambient, within [-1, 1]:
-    -1 for a hot flame seen by every view, +1 for the reverse (reference and distorted images swapped, or the
-    deflections' sign reversed). Per view and image row, the deflection along the row, ``g = dP/dc`` with ``P``
-    the line integral of sigma along the rays, has the first moment ``sum_c (c - c_mean) g_c = -sum_c P_c`` (up to
-    the rows' ends): negative where ``P`` is, as through a flame. Returns the moments summed over rows and views,
-    over the sum of their magnitudes (``per_view``: a list, each view's own). Measured: -0.75 to -1.0 on the
-    synthetic flames, -0.81 on the independent capture through the optical flow, -0.35 on the paper's Phantom 1."""
-    sums = []
-    for v in range(scene.n_views):
-        sl = scene.view_slice(v)
-        e = scene.view_image(v, scene.observed[sl].double().cpu().numpy(), np.nan)
-        d = scene.view_image(v, scene.dirs[sl].double().cpu().numpy(), np.nan)
-        along = d[:, 1:] - d[:, :-1]  # the world direction in which the column grows
-        along /= np.linalg.norm(along, axis=-1, keepdims=True)
-        g = (0.5 * (e[:, 1:] + e[:, :-1]) * along).sum(-1)
-        ok = np.isfinite(g)
-        g = np.where(ok, g, 0.0)
-        c = np.arange(g.shape[1], dtype=np.float64)[None, :]
-        c_mean = (c * ok).sum(1, keepdims=True) / np.maximum(ok.sum(1, keepdims=True), 1)
-        moment = (c - c_mean) * g
-        sums.append((-moment.sum(), np.abs(moment).sum()))  # -sum_c P_c, and the scale
-    if per_view:
-        return [float(n / d) if d > 0 else 0.0 for n, d in sums]
-    num, den = sum(n for n, _ in sums), sum(d for _, d in sums)
-    return float(num / den) if den > 0 else 0.0
-
-
-def view_directions(cameras: list[Camera], tol_deg: float = 1.0) -> int:
-    """How many distinct directions the cameras look along (axes within ``tol_deg`` count as one, as do opposite
-    ones: a ray and its reverse see the same line integral)."""
-    axes = [np.asarray(c.rotation)[:, 2] for c in cameras]
-    distinct: list[np.ndarray] = []
-    for a in axes:
-        if all(abs(float(a @ b)) < np.cos(np.deg2rad(tol_deg)) for b in distinct):
-            distinct.append(a)
-    return len(distinct)
-
-
-def view_span_deg(cameras: list[Camera]) -> float:
-    """The widest angle between two cameras' viewing axes [deg], opposite axes counting as one (0 to 90)."""
-    axes = np.stack([np.asarray(c.rotation)[:, 2] for c in cameras])
-    cos = np.clip(np.abs(axes @ axes.T), 0.0, 1.0)
-    return float(np.rad2deg(np.arccos(cos.min())))
 
 
 def heldout_views(heldout, n_views: int, what: str = "the held-out views") -> list[int]:

@@ -27,7 +27,7 @@ import numpy as np
 from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest, resolve_binning
 from nerif.data.scene import DATASETS, Scene, scene_from_images
 from nerif.geometry import Camera, ProbeBox, camera_from_nerf_pose
-from nerif.io.export import atomic_write, write_png
+from nerif.export import atomic_write, write_png
 from nerif.physics import Ambient
 from nerif.sensing.imaging import resample
 

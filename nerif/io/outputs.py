@@ -17,7 +17,7 @@ import torch
 
 import nerif.io.plots as plots
 from nerif.cache import cached_arrays, content_digest, source_digest
-from nerif.io.export import atomic_write, write_npz, write_png, write_vti
+from nerif.export import atomic_write, write_npz, write_png, write_vti
 from nerif.io.units import VOLUMES
 from nerif.metrics import temperature_figures, uncertainty_scores
 from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
@@ -136,17 +136,6 @@ def write_heldout(solver, out_dir: Path) -> dict:
     return ev.heldout_errors(solver.predict, every=True, pred=pred)
 
 
-def heldout_explained(m: dict) -> dict:
-    """The quality figure a user without a truth can read: the share of the held-out view's measured displacements
-    (their mean square) that the fit explains, ``1 - (heldout_displacement_rmse_px / ..._none)^2``
-    (``heldout_explained``): near 1 where the fit and the data agree, falling as the data get noisier or the views
-    disagree, below 0 for a failed fit. Empty without held-out displacements."""
-    fit, none = m.get("heldout_displacement_rmse_px"), m.get("heldout_displacement_rmse_px_none")
-    if fit is None or not none:
-        return {}
-    return {"heldout_explained": float(1.0 - (fit / none) ** 2)}
-
-
 def failed_fit(m: dict) -> str:
     """One sentence where the held-out views say the fit failed: its prediction explains their images, or their
     displacements, worse than no flame at all would (``heldout_*`` against ``heldout_*_none``); else ""."""
@@ -192,7 +181,6 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float,
         final.update(write_heldout(solver, out_dir))  # every held-out ray, not the evaluation subset
         final["history_note"] = ("history follows the errors on a fixed subset of rays (metrics.eval_rays_per_view "
                                  "per view); the final heldout_* figures use every held-out ray")
-        final.update(heldout_explained(final))
         failed = failed_fit(final)
         if failed:
             log.warning("%s", failed)

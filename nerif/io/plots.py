@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from nerif.io.export import atomic_write  # noqa: E402
+from nerif.export import atomic_write  # noqa: E402
 from nerif.geometry import ProbeBox  # noqa: E402
 
 

@@ -12,7 +12,7 @@ from typing import Any
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
-from nerif.io.export import atomic_write, write_json
+from nerif.export import atomic_write, write_json
 
 log = logging.getLogger("nerif")
 FAILED = "failed.json"  # written in a job's folder when the job failed: {"error": its one-sentence message}

@@ -98,7 +98,7 @@ def outside_reach(u: np.ndarray, valid: np.ndarray, quiet: Optional[np.ndarray])
 
 def images_compared(distorted: np.ndarray, reference: np.ndarray, width_px: float,
                     contrast: Optional[np.ndarray] = None) -> dict:
-    """What a view's two exposures (H, W) say of each other, for :mod:`nerif.data.view_check`: ``difference_rms``,
+    """What a view's two exposures (H, W) say of each other, for :mod:`nerif.data.diagnostics`: ``difference_rms``,
     the RMS of their difference [share of full scale] (0: the same image), and ``texture_ratio``, the distorted
     exposure's median local contrast (:func:`~nerif.sensing.occlusion.local_contrast` over the texture's width
     ``width_px``) over the reference's (about 1: the same background; near 0: black, flat or overexposed);

@@ -24,7 +24,7 @@ import torch
 
 from nerif.evaluation import Evaluation
 from nerif.geometry import box_faces
-from nerif.io.export import atomic_save_torch
+from nerif.export import atomic_save_torch
 from nerif.masks.backprojection import ambient_faces
 from nerif.registry import Registry
 

@@ -293,16 +293,9 @@ class ImageTerm(DeflectionTerm):
 
     @staticmethod
     def unfit(scene: Scene) -> str:
-        """What the scene lacks for this term ("" when nothing): its background images, or rays a whole number
-        (at least 2, the same for every view) of image pixels apart on images of one size."""
-        if scene.images is None:
-            return "the background images, which these data do not have"
-        b = scene.image_block()
-        if len({im.reference.shape for im in scene.images}) > 1 or b is None or b < 2:
-            return ("every view's rays a whole number (at least 2) of image pixels apart, the same for all, on "
-                    f"images of one size (rays binned {scene.cameras[0].binning}, images "
-                    f"{scene.images[0].camera.binning}): raise the binning (data.binning or rig.binning)")
-        return ""
+        """What the scene lacks for this term ("" when nothing): its background images, or rays a whole number (at
+        least 2, the same for every view) of image pixels apart on images of one size."""
+        return scene.lacks_image_model(min_block=2, one_size=True)
 
     def stages(self) -> list[Stage]:
         """The flow's deflections for ``flow_iterations`` (:attr:`flow`), then the images for ``image_iterations``

@@ -35,15 +35,13 @@ def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: floa
             capture, a row's squared residual was 0.011 of the deflection's: the flow's bracket of weights was
             about 90x too strong there. False: the pixels' own equations (intensity units).
     """
-    if scene.images is None:
-        raise ValueError("solver=cgls data_term=images (unified BOS) needs the background images, which these data "
-                         "do not have: use data=capture or data.sensing=realistic")
+    lacks = scene.lacks_image_model()
+    if lacks:
+        hint = ": use data=capture or data.sensing=realistic" if scene.images is None else ""
+        raise ValueError(f"solver=cgls data_term=images (unified BOS) needs {lacks}{hint}")
     if linearize_at not in ("zero", "flow"):
         raise ValueError(f"linearize_at must be zero or flow, got '{linearize_at}'")
     b = scene.image_block()
-    if b is None:
-        raise ValueError(f"solver=cgls data_term=images: rays binned {scene.cameras[0].binning} are not a whole number "
-                         f"of image pixels (images binned {scene.images[0].camera.binning}) in every view")
     Ms, cs = [], []
     for view in observations(scene):
         A = view.gain_px  # (n, 2, 3) image px per sigma unit

@@ -1,4 +1,4 @@
-"""Each view of a capture checked on its own (:mod:`nerif.data.view_check`), on the tiny capture of
+"""Each view of a capture checked on its own (:mod:`nerif.data.diagnostics`), on the tiny capture of
 ``test_capture.py``: one bad view left out and named, too many stop the run."""
 import shutil
 
