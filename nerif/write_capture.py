@@ -19,7 +19,6 @@ from typing import Optional
 
 import cv2
 import numpy as np
-import yaml
 
 from hydra.errors import HydraException
 
@@ -27,7 +26,7 @@ from nerif.app import unexpected
 from nerif.configs import check_complete, check_kinds, compose, group, group_choices, unknown_override
 from nerif.data import DATASETS
 from nerif.sequence import frames_of
-from nerif.data.rig_file import RIG_FILE, RIG_VERSION, read_rig
+from nerif.data.rig_file import CALIBRATED_VERSION, read_rig, write_rig
 from nerif.data.scene import Scene
 from nerif.geometry import Camera
 from nerif.export import atomic_write, write_npz, write_png
@@ -71,26 +70,18 @@ def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Opt
         if series:
             raise ValueError("a time series through a calibrated rig is not written yet: write one state at a time")
         return write_calibrated(first, root, listed[0], heldout)
-    cam = first.cameras[0].unbinned(first.cameras[0].binning)  # the full sensor
+    cam = first.cameras[0].full_sensor
     angles = [round(float(np.degrees(np.arctan2(c.position[0], c.position[2]))), 6) for c in first.cameras]
     views = {"angles_deg": angles, "references": [f"reference_{v:02d}.png" for v in range(n)]}
-    rig = {"format": "nerif-capture", "version": RIG_VERSION,
-           "camera": {"focal_mm": float(cam.focal_mm), "pitch_um": round(cam.pitch_mm * 1e3 * cam.width / W, 9),
-                      "sensor_px": [W, H], "f_number": float(cam.f_number),
-                      "camera_to_centre_mm": round(probe_distance_mm(cam), 9),
-                      "camera_to_background_mm": float(cam.background_mm)},
-           "views": views if series else {**views, "images": listed[0]}}
+    blocks = {"camera": {"focal_mm": float(cam.focal_mm), "pitch_um": round(cam.pitch_mm * 1e3 * cam.width / W, 9),
+                         "sensor_px": [W, H], "f_number": float(cam.f_number),
+                         "camera_to_centre_mm": round(probe_distance_mm(cam), 9),
+                         "camera_to_background_mm": float(cam.background_mm)},
+              "views": views if series else {**views, "images": listed[0]}}
     if series:
-        rig["frames"] = [{"time_s": float(t), "images": images} for t, images in zip(times, listed)]
-    rig.update({"roi_px": [0, 0, W, H],
-                "probe": {"shape": [int(s) for s in first.box.shape], "voxel_mm": float(first.box.voxel_mm)},
-                "ambient": {"T0": float(first.ambient.T0), "n0": float(first.ambient.n0)},
-                "T_max": float(first.ambient.T_max),
-                "temperature_range_K": [float(first.ambient.T0), float(first.ambient.T_max)],
-                "heldout": list(heldout) if heldout is not None else [n - 1]})
-    atomic_write(root / RIG_FILE, lambda t: Path(t).write_text(
-        "# nerif capture rig file (format: docs/captures.md); written from a synthetic scene\n"
-        + yaml.safe_dump(rig, sort_keys=False, default_flow_style=None)))
+        blocks["frames"] = [{"time_s": float(t), "images": images} for t, images in zip(times, listed)]
+    blocks["roi_px"] = [0, 0, W, H]
+    write_rig(root, blocks, first.box, first.ambient, list(heldout) if heldout is not None else [n - 1])
     return root
 
 
@@ -129,22 +120,15 @@ def write_calibration(cameras: list[Camera], images: list[str], references: list
 
 
 def write_calibrated(scene: Scene, root: Path, images: list[str], heldout: Optional[list] = None) -> Path:
-    """The rig file of version 3 and its calibration file, for a scene of calibrated cameras whose images are
+    """The rig file of calibrated cameras (version 3) and its calibration file, for a scene of calibrated cameras whose images are
     written (:func:`write_capture`)."""
     n, H, W = scene.sensing.distorted.shape
-    cams = [c.unbinned(c.binning) for c in scene.cameras]
+    cams = [c.full_sensor for c in scene.cameras]
     cams = [c.binned(c.width // W) if c.width != W else c for c in cams]  # the images' grid
     refs = [f"reference_{v:02d}.png" for v in range(n)]
     write_calibration(cams, images, refs, root / "calibration.yml")
-    rig = {"format": "nerif-capture", "version": 3, "calibration": "calibration.yml",
-           "probe": {"shape": [int(s) for s in scene.box.shape], "voxel_mm": float(scene.box.voxel_mm)},
-           "ambient": {"T0": float(scene.ambient.T0), "n0": float(scene.ambient.n0)},
-           "T_max": float(scene.ambient.T_max), "f_number": float(cams[0].f_number),
-           "temperature_range_K": [float(scene.ambient.T0), float(scene.ambient.T_max)],
-           "heldout": list(heldout) if heldout is not None else [n - 1]}
-    atomic_write(root / RIG_FILE, lambda t: Path(t).write_text(
-        "# nerif capture rig file, version 3 (format: docs/captures.md); written from a synthetic scene\n"
-        + yaml.safe_dump(rig, sort_keys=False, default_flow_style=None)))
+    write_rig(root, {"calibration": "calibration.yml", "f_number": float(cams[0].f_number)}, scene.box, scene.ambient,
+              list(heldout) if heldout is not None else [n - 1], version=CALIBRATED_VERSION)
     return root
 
 

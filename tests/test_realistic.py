@@ -86,7 +86,7 @@ def test_the_circle_of_confusion_is_each_views_own(tmp_path):
 
     scene = calibrated_scene("null")
     coc = scene.sensing.circle_of_confusion_px
-    own = [circle_of_confusion(c.unbinned(c.binning))["d_mm"] / (c.pitch_mm / c.binning) for c in scene.cameras]
+    own = [circle_of_confusion(c.full_sensor)["d_mm"] / (c.pitch_mm / c.binning) for c in scene.cameras]
     assert coc.shape == (3,) and np.ptp(coc) > 0.01 * coc.max()
     np.testing.assert_allclose(coc, own, rtol=1e-9)
 

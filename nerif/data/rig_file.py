@@ -1,6 +1,6 @@
-"""A capture's rig file, ``rig.yaml``, read once and checked into a typed :class:`RigFile` (format versions 1-3:
-one camera model on an arc, a time series, OpenCV-calibrated cameras; every key is explained in
-``docs/captures.md``)."""
+"""A capture's rig file, ``rig.yaml``: read once and checked into a typed :class:`RigFile`, and written
+(:func:`write_rig`), every format version here (1-3: one camera model on an arc, a time series, OpenCV-calibrated
+cameras; every key is explained in ``docs/captures.md``)."""
 from __future__ import annotations
 
 import difflib
@@ -13,11 +13,13 @@ import yaml
 
 from nerif.data.calibration import (DISTANCE_MM, F_NUMBER, FOCAL_MM, PITCH_UM, calibrated_camera, calibration_entry,
                                     plausible, read_calibration)
+from nerif.export import atomic_write
 from nerif.geometry import Camera, ProbeBox, arc_rig
 from nerif.physics import Ambient
 
 RIG_FILE = "rig.yaml"
 RIG_VERSION = 2  # what the writer of a steady or time-resolved arc capture writes
+CALIBRATED_VERSION = 3  # what the writer of a capture of calibrated cameras writes
 READ_VERSIONS = (1, 2, 3)
 FORMAT_DOC = "docs/captures.md"
 ARC_KEYS = ("focal_mm", "pitch_um", "f_number", "camera_to_centre_mm", "camera_to_background_mm")
@@ -369,3 +371,20 @@ def _exposures_entry(entry, what: str):
 def exposures(entry) -> tuple[str, ...]:
     """The files of one view's image in a :class:`RigFile` (a file, or the tuple of its exposures)."""
     return entry if isinstance(entry, tuple) else (entry,)
+
+
+def write_rig(root: Path, blocks: dict, box: ProbeBox, ambient: Ambient, heldout: list[int],
+              version: int = RIG_VERSION) -> Path:
+    """``rig.yaml`` of the capture folder ``root``, written atomically: the format and ``version``, then
+    ``blocks`` (the cameras as the version holds them: ``camera`` and ``views`` of an arc, ``calibration`` of
+    calibrated cameras, ...), then what every version holds: the probe grid of ``box``, the ``ambient`` gas, its
+    ``T_max`` and temperature range, and the ``heldout`` views."""
+    if version not in READ_VERSIONS:
+        raise ValueError(f"rig file version {version}: this nerif writes versions {READ_VERSIONS}")
+    rig = {"format": "nerif-capture", "version": version, **blocks,
+           "probe": {"shape": [int(s) for s in box.shape], "voxel_mm": float(box.voxel_mm)},
+           "ambient": {"T0": float(ambient.T0), "n0": float(ambient.n0)}, "T_max": float(ambient.T_max),
+           "temperature_range_K": [float(ambient.T0), float(ambient.T_max)], "heldout": list(heldout)}
+    header = f"# nerif capture rig file, version {version} (format: {FORMAT_DOC}); written from a synthetic scene\n"
+    return atomic_write(root / RIG_FILE, lambda t: Path(t).write_text(
+        header + yaml.safe_dump(rig, sort_keys=False, default_flow_style=None)))

@@ -196,7 +196,7 @@ class Scene:
         out = self.dirs.new_zeros(len(self.dirs), 2, 3, dtype=torch.float64)
         for v, cam in enumerate(self.cameras):
             sl = self.view_slice(v)
-            out[sl] = displacement_matrix(self.dirs[sl].double(), cam.unbinned(cam.binning))
+            out[sl] = displacement_matrix(self.dirs[sl].double(), cam.full_sensor)
         return out
 
     def to_displacement(self, eps: torch.Tensor, index: Optional[torch.Tensor] = None) -> torch.Tensor:
@@ -371,7 +371,7 @@ def scene_from_displacements(box: ProbeBox, ambient: Ambient, cameras: list[Came
     origins, dirs, u, pixel, view_start = _gathered(rays, displacements, valid, cameras, box, measured=True)
     eps = torch.cat([displacement_to_deflection(u[view_start[v]:view_start[v + 1]],
                                                 dirs[view_start[v]:view_start[v + 1]].double(),
-                                                cam.unbinned(cam.binning)) for v, cam in enumerate(cameras)])
+                                                cam.full_sensor) for v, cam in enumerate(cameras)])
     views = views_of(cameras, images, [np.asarray(ok, dtype=bool) for ok in valid], found=found,
                      measured_px=list(displacements) if left_out is not None else None, left_out=left_out)
     return Scene(box=box, ambient=ambient, views=views, origins=origins, dirs=dirs, eps=eps.float(), pixel=pixel,

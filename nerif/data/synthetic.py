@@ -120,7 +120,7 @@ def measured_scene(ph, ambient: Ambient, cameras: list, rays: tuple, record: Sen
     binning = int(sensor.get("image_binning", 1))
     images = [ViewImages(torch.as_tensor(record.reference[v] / 255.0, dtype=torch.float32, device=device),
                          torch.as_tensor(record.distorted[v] / 255.0, dtype=torch.float32, device=device),
-                         cam.unbinned(cam.binning).binned(binning)) for v, cam in enumerate(cameras)]
+                         cam.full_sensor.binned(binning)) for v, cam in enumerate(cameras)]
     found = {k: v.tolist() for k, v in record.found.items()}
     return scene_from_displacements(ph.box, ambient, cameras, list(record.displacement_px), list(record.valid),
                                     device=device, rays=rays, images=images, found=found, truth_T=ph.T, sensing=record,

@@ -104,6 +104,11 @@ class Camera:
         return replace(self, pitch_mm=self.pitch_mm / factor, width=self.width * factor, height=self.height * factor,
                        binning=max(self.binning // factor, 1), centre_px=centre)
 
+    @property
+    def full_sensor(self) -> "Camera":
+        """This camera as its full sensor reads it, unbinned (:meth:`unbinned` by its own :attr:`binning`)."""
+        return self.unbinned(self.binning)
+
     def normalised(self, pixels: np.ndarray) -> np.ndarray:
         """Pixel positions (N, 2) (column, row; centres at +0.5) -> undistorted normalised image coordinates (N, 2)
         (x / z, y / z in the camera frame): OpenCV's iterative undistortion, run to 1e-14."""
