@@ -1,15 +1,16 @@
-"""How well the per-voxel uncertainty (``uncertainty=ensemble``) describes the error, on scenes it was not tuned on
-(issue 48).
+"""How well the per-voxel uncertainty (``uncertainty=ensemble``, or ``--method laplace``) describes the error, on
+scenes it was not tuned on (issues 48, 57).
 
     python benchmarks/uncertainty.py                                      # the shared captures and every family
     python benchmarks/uncertainty.py --captures bunsen --families plumes --seeds 0 --noise 0
     python benchmarks/uncertainty.py --set uncertainty.members=6          # other settings of the estimator
     python benchmarks/uncertainty.py --resume                             # read back the runs already finished
+    python benchmarks/uncertainty.py --method laplace                     # the Laplace approximation instead
 
 Scenes: the shared independent captures (``bunsen``, ``bunsen_multicam``, ``lifted``: ``benchmarks/independent.py``'s
 overrides, rays one voxel apart) and the analytic flame families of :mod:`nerif.data.families` (each ``--seeds``
 draw, clean and with ``--noise``: ``benchmarks/families.py``'s datasets). Each scene is one ``python -m nerif``
-with every default and ``uncertainty=ensemble``; the members leave the trained field as it was (the reconstruction
+with every default and ``uncertainty=<--method>``; the members (or the drawn fields) leave the trained field as it was (the reconstruction
 and its error are the run's without uncertainty: a test checks it), so the run's time less the members'
 (``uncertainty_time_s``) is the single run's. Columns, over the truth's flame voxels (|sigma| above 5 % of its
 peak): coverage at 1 and 2 standard deviations, at 2 in the hot core (the hottest 5 %), AUSE, Spearman's rank
@@ -43,8 +44,8 @@ COLUMNS = (("cover 1s", "uncertainty_coverage_1sigma"), ("cover 2s", "uncertaint
            ("scale", "uncertainty_scale"), ("time x", "time_ratio"))
 
 
-def run(overrides: list[str], folder: Path, settings: list[str], resume: bool) -> dict:
-    """One run with the ensemble: its figures (``KEYS``) and the time over the single run's."""
+def run(overrides: list[str], folder: Path, settings: list[str], resume: bool, method: str = "ensemble") -> dict:
+    """One run with the uncertainty ``method``: its figures (``KEYS``) and the time over the single run's."""
     import subprocess
 
     record = folder / "uncertainty_row.json"
@@ -52,7 +53,7 @@ def run(overrides: list[str], folder: Path, settings: list[str], resume: bool) -
         return json.loads(record.read_text())
     shutil.rmtree(folder, ignore_errors=True)
     done = subprocess.run([sys.executable, "-m", "nerif", f"hydra.run.dir={folder.resolve()}", "train.progress=false",
-                           "uncertainty=ensemble", *overrides, *settings], cwd=REPO, capture_output=True, text=True)
+                           f"uncertainty={method}", *overrides, *settings], cwd=REPO, capture_output=True, text=True)
     metrics = folder / "metrics.json"
     if done.returncode or not metrics.is_file():
         return {"exit": done.returncode, "message": (done.stderr.strip().splitlines() or [""])[-1][:200]}
@@ -96,15 +97,16 @@ def main() -> None:
     p.add_argument("--set", nargs="*", default=[], help="further overrides of every run")
     p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "uncertainty")
     p.add_argument("--resume", action="store_true")
+    p.add_argument("--method", default="ensemble", help="the uncertainty method (ensemble, laplace)")
     args = p.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     rows = {}
     for name, overrides in scenes(args, args.out).items():
-        rows[name] = run(overrides, args.out / "runs" / name.replace(" ", "_"), args.set, args.resume)
+        rows[name] = run(overrides, args.out / "runs" / name.replace(" ", "_"), args.set, args.resume, args.method)
         print(name, json.dumps(rows[name]), flush=True)
     text = table(rows)
     write_report(args.out, "uncertainty", rows, "# The per-voxel uncertainty against the truth\n\n"
-                 f"Settings: every default, uncertainty=ensemble {' '.join(args.set)}\n\n{text}\n")
+                 f"Settings: every default, uncertainty={args.method} {' '.join(args.set)}\n\n{text}\n")
 
 
 if __name__ == "__main__":

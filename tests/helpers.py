@@ -30,6 +30,26 @@ def solver(cfg, scene, masks=None):
     return SOLVERS.build(group(cfg, "solver")).setup(scene, masks if masks is not None else Masks())
 
 
+def trained_on_half_the_box(iterations: int = 60):
+    """(solver, scene): the tiny scene with the upper half of the box hidden from every view (its rays left out, no
+    3-D mask), view 5 held out, trained for ``iterations``: where no ray reaches, the data say nothing."""
+    from dataclasses import replace
+
+    from nerif.data import DATASETS
+    from nerif.data.scene import keep_rays
+    from nerif.masks import MASKS
+
+    cfg = tiny_config(f"train.iterations={iterations}", "mask=none")
+    scene = DATASETS.build(group(cfg, "data"))
+    rows = scene.pixel // scene.cameras[0].width
+    dirs, eps, pixel, starts = keep_rays(scene.dirs, scene.eps, scene.pixel, scene.view_start,
+                                         rows >= rows.double().median())
+    scene = replace(scene, dirs=dirs, eps=eps, pixel=pixel, view_start=starts).split_views([5])
+    s = solver(cfg, scene, MASKS.build(group(cfg, "mask"), scene=scene))
+    s.fit(checkpoint_every=10**9, progress=False)
+    return s, scene
+
+
 ROOT = Path(__file__).resolve().parents[1]  # the clone
 SHARED = Path(os.environ.get("NERIF_SHARED", Path(__file__).resolve().parents[2] / "shared")) / "data"
 

@@ -121,22 +121,9 @@ def test_a_voxel_no_ray_reaches_is_less_certain_than_one_every_view_sees_and_the
     """The upper half of the box hidden from every view (no 3-D mask): there the data say nothing, and the standard
     deviation is at least the prior's; where every view looks it is the members' calibrated spread. The members
     leave the solver's result as it was."""
-    from dataclasses import replace
+    from tests.helpers import trained_on_half_the_box
 
-    from nerif.configs import group
-    from nerif.data import DATASETS
-    from nerif.data.scene import keep_rays
-    from nerif.masks import MASKS
-    from tests.helpers import solver, tiny_config
-
-    cfg = tiny_config("train.iterations=60", "mask=none")
-    scene = DATASETS.build(group(cfg, "data"))
-    rows = scene.pixel // scene.cameras[0].width
-    dirs, eps, pixel, starts = keep_rays(scene.dirs, scene.eps, scene.pixel, scene.view_start,
-                                         rows >= rows.double().median())
-    scene = replace(scene, dirs=dirs, eps=eps, pixel=pixel, view_start=starts).split_views([5])
-    s = solver(cfg, scene, MASKS.build(group(cfg, "mask"), scene=scene))
-    s.fit(checkpoint_every=10**9, progress=False)
+    s, scene = trained_on_half_the_box()
     before = s.reconstruction()
     out = UNCERTAINTY.build({"name": "ensemble", "members": 2, "fraction": 0.5})(s)
     np.testing.assert_array_equal(s.reconstruction(), before)

@@ -278,9 +278,10 @@ class NeuralSolver(IterativeSolver):
         return d if self.scene.perpendicular_only else None
 
     # --- optimisation ---
-    def step(self) -> dict:
-        """One iteration on the next views (:meth:`RayBatcher.views`); returns the loss terms (floats)."""
-        t0 = time.perf_counter()
+    def batch_loss(self) -> tuple[dict, object]:
+        """The loss of the next batch of the stage that holds :attr:`iteration` (its rays drawn from
+        :attr:`generator`, the occupancy grid updated first), with its graph to the field's parameters: ``loss``
+        (the weighted sum), ``loss_<term>`` of the data term, ``loss_boundary``, ``loss_tv``; and the samples."""
         self.sampler.update(self.scene.box, self.occupancy_value, self.iteration, self.generator)
         stage = self.plan.at(self.iteration)
         batch = stage.term.draw(self.iteration)
@@ -290,21 +291,23 @@ class NeuralSolver(IterativeSolver):
                                  stencil=self.stencil)
         terms = stage.term.terms(eps, batch, self.iteration)
         loss = weighted_sum(terms, self.weights)
-        boundary = self.boundary(self.field, self.generator) if self.boundary is not None else None
-        if boundary is not None:
-            loss = loss + boundary
-        tv = self.tv(self.field, self.generator) if self.tv is not None else None
-        if tv is not None:
-            loss = loss + tv
+        named = {f"loss_{n}": t for n, t in terms.items()}
+        for name, term in (("boundary", self.boundary), ("tv", self.tv)):
+            value = term(self.field, self.generator) if term is not None else None
+            if value is not None:
+                loss = loss + value
+                named[f"loss_{name}"] = value
+        return {"loss": loss, **named}, samples
+
+    def step(self) -> dict:
+        """One iteration on the next views (:meth:`RayBatcher.views`); returns the loss terms (floats)."""
+        t0 = time.perf_counter()
+        named, samples = self.batch_loss()
+        loss = named["loss"]
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
         self.scheduler.step()
-        named = {"loss": loss, **{f"loss_{n}": t for n, t in terms.items()}}
-        if boundary is not None:
-            named["loss_boundary"] = boundary
-        if tv is not None:
-            named["loss_tv"] = tv
         per_ray = samples.per_ray
         # every number of the step in one transfer: one wait for the device per step, not one per number
         stats = torch.stack([t.detach().float() for t in named.values()] +

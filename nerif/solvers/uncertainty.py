@@ -113,27 +113,40 @@ class ViewEnsemble:
                 held_pred.append(heldout_fit(member))
             log.info("uncertainty: member %d of %d (without %s) trained for %d iterations", k + 1, self.members,
                      ", ".join(scene.cameras[v].name for v in out), iterations)
-        spread = np.std(np.stack(fields), axis=0, ddof=1)
-        if held:
-            factor, source = calibration(heldout_fit(solver), torch.stack(held_pred), scene.heldout.observed), \
-                "held-out views"
-        else:  # the members started from a field that saw every training view: their residuals there say nothing
-            factor, source = 1.0, "none (no held-out view)"
-            log.warning("uncertainty: no held-out view to calibrate the members' spread by; sigma_std is their spread "
-                        "as it is, likely too narrow (hold a view out: data.heldout)")
-        log.info("uncertainty: %d members, spread scaled by %.3g (read from %s) in %.1f s", self.members, factor,
-                 source, time.perf_counter() - t0)
-        seeing = views_seeing(scene.box, scene.cameras,
-                              [scene.view_image(v, np.ones(int(scene.view_counts()[v]))) > 0
-                               for v in range(scene.n_views)])
-        std = factor * spread
-        a, b = solver.interval
-        std[seeing == 0] = np.maximum(std[seeing == 0], (b - a) / 12 ** 0.5)  # no ray: only the prior's bounds
-        return {"volumes": {"sigma_std": std, "views_seeing": seeing.astype(np.float64)},
-                "report": {"uncertainty": "ensemble", "uncertainty_members": self.members,
-                           "uncertainty_member_iterations": iterations, "uncertainty_scale": float(factor),
-                           "uncertainty_scale_from": source, "uncertainty_time_s": time.perf_counter() - t0,
-                           "uncertainty_spread_median": float(np.median(spread))}}
+        report = {"uncertainty": "ensemble", "uncertainty_members": self.members,
+                  "uncertainty_member_iterations": iterations}
+        return calibrated_spread(solver, fields, held_pred, report, t0)
+
+
+def calibrated_spread(solver, fields: list[np.ndarray], held_pred: list[torch.Tensor], report: dict,
+                      t0: float) -> dict:
+    """What an uncertainty method returns from the fields it drew about ``solver``'s result: their spread per voxel
+    (``fields``: K (nx, ny, nz) sigma), scaled by :func:`calibration` so that it explains the field's error on the
+    held-out views (``held_pred``: K (R, 3) their predictions there; empty without held-out views: the spread as it
+    is, with a warning), at least a uniform spread over the field's prior interval where no training ray reaches a
+    voxel; ``volumes`` (``sigma_std``, ``views_seeing``) and ``report`` (``report`` with the scale, what it was
+    read from, the time since ``t0`` and the spread's median)."""
+    scene = solver.scene
+    spread = np.std(np.stack(fields), axis=0, ddof=1)
+    if held_pred:
+        factor, source = calibration(heldout_fit(solver), torch.stack(held_pred), scene.heldout.observed), \
+            "held-out views"
+    else:  # the fields started from one that saw every training view: their residuals there say nothing
+        factor, source = 1.0, "none (no held-out view)"
+        log.warning("uncertainty: no held-out view to calibrate the spread by; sigma_std is the spread as it is, "
+                    "likely too narrow (hold a view out: data.heldout)")
+    log.info("uncertainty: %d fields (%s), spread scaled by %.3g (read from %s) in %.1f s", len(fields),
+             report["uncertainty"], factor, source, time.perf_counter() - t0)
+    seeing = views_seeing(scene.box, scene.cameras,
+                          [scene.view_image(v, np.ones(int(scene.view_counts()[v]))) > 0
+                           for v in range(scene.n_views)])
+    std = factor * spread
+    a, b = solver.interval
+    std[seeing == 0] = np.maximum(std[seeing == 0], (b - a) / 12 ** 0.5)  # no ray: only the prior's bounds
+    return {"volumes": {"sigma_std": std, "views_seeing": seeing.astype(np.float64)},
+            "report": {**report, "uncertainty_scale": float(factor), "uncertainty_scale_from": source,
+                       "uncertainty_time_s": time.perf_counter() - t0,
+                       "uncertainty_spread_median": float(np.median(spread))}}
 
 
 def heldout_fit(solver) -> torch.Tensor:
