@@ -98,12 +98,44 @@ def reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Opt
                             about=about, resume_hint=resume_hint, threads=threads)
 
 
-def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: WarningRecords, *, frame, start_from,
-                 t_start, about, resume_hint, threads) -> dict:
-    """:func:`reconstruct`, with the warnings logged meanwhile in ``records``."""
-    t_start = time.perf_counter() if t_start is None else t_start
-    torch.manual_seed(cfg.seed)
-    # every check that can fail happens here, before any training; the solver checks its settings before any data
+class Board:
+    """A run's TensorBoard (``out_dir/tensorboard``): the loss terms every 10 steps, each evaluation's figures, the
+    slices every ``image_every`` iterations and the final slices and profiles; the losses kept for ``curves.png``."""
+
+    def __init__(self, out_dir: Path, solver, scene, image_every: int):
+        from torch.utils.tensorboard import SummaryWriter
+
+        self.writer = SummaryWriter(log_dir=str(out_dir / "tensorboard"))
+        self.solver, self.scene, self.image_every = solver, scene, image_every
+        self.losses: list[tuple[int, dict]] = []
+
+    def on_step(self, it: int, terms: dict) -> None:
+        self.losses.append((it, terms))
+        if it % 10 == 0:
+            for k, v in terms.items():
+                self.writer.add_scalar(f"train/{k}", v, it)
+
+    def on_eval(self, m: dict) -> None:
+        it = m["iteration"]
+        for k, v in m.items():
+            if k != "iteration" and isinstance(v, (int, float)):  # None: not defined here (no flame)
+                self.writer.add_scalar(f"eval/{k}", v, it)
+        if it % self.image_every == 0 and it < self.solver.iterations:  # the final state's: written with the results
+            self.writer.add_figure("slices", volume_slices(self.solver.reconstruction(), self.scene,
+                                                           f"iteration {it}"), it)
+        self.writer.flush()
+
+    def show(self, name: str, fig) -> None:
+        """The final slices and profiles in TensorBoard too, drawn once."""
+        self.writer.add_figure(name, fig, self.solver.iteration, close=False)
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+def _prepare(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Optional[int]) -> tuple:
+    """Every part of a run, each checked before any training (the solver its settings before any data are made),
+    and the masks and the sensing record written: (solver set up, uncertainty, scene, the rig's warnings)."""
     solver = SOLVERS.build(group(cfg, "solver"))
     uncertainty = UNCERTAINTY.build(group(cfg, "uncertainty"))
     extra = {} if frame is None else {"frame": frame}
@@ -112,44 +144,29 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
     solver.setup(scene, masks)  # checks a known truth against the prior first
     uncertainty.check(solver)
     rig_warnings = check_sign(scene, cfg.field.prior) + ill_posed(scene)
-    tc = cfg.train
     write_masks(masks, scene, out_dir)
     write_sensing(scene, out_dir, CAUSES, cfg.data.get("cache_dir"))
-    checkpoint = out_dir / "checkpoint.pt"
-    resume = checkpoint_to_resume(tc.resume, checkpoint)
+    return solver, uncertainty, scene, rig_warnings
+
+
+def _start(solver, resume_setting, checkpoint: Path, start_from: Optional[Path]) -> None:
+    """The solver's state to train on from: its own checkpoint where the run resumes (:func:`checkpoint_to_resume`),
+    else the previous frame's (``start_from``), else as set up."""
+    resume = checkpoint_to_resume(resume_setting, checkpoint)
     if resume is not None:
         solver.load(resume)
         log.info("resumed from %s at iteration %d", resume, solver.iteration)
     elif start_from is not None:
         solver.start_from(start_from)
         log.info("warm start from %s", start_from)
-    setup_s = time.perf_counter() - t_start
 
-    from torch.utils.tensorboard import SummaryWriter
 
-    writer = SummaryWriter(log_dir=str(out_dir / "tensorboard"))
-    losses: list[tuple[int, dict]] = []
-
-    def on_step(it: int, terms: dict) -> None:
-        losses.append((it, terms))
-        if it % 10 == 0:
-            for k, v in terms.items():
-                writer.add_scalar(f"train/{k}", v, it)
-
-    def on_eval(m: dict) -> None:
-        it = m["iteration"]
-        for k, v in m.items():
-            if k != "iteration" and isinstance(v, (int, float)):  # None: not defined here (no flame)
-                writer.add_scalar(f"eval/{k}", v, it)
-        if it % tc.image_every == 0 and it < solver.iterations:  # the final state's: written with the results
-            writer.add_figure("slices", volume_slices(solver.reconstruction(), scene, f"iteration {it}"), it)
-        writer.flush()
-
-    log.info("%s: %d views, %d rays; %s, device %s", cfg.data.name, scene.n_views, len(scene.dirs),
-             ", ".join(f"{k} {v}" for k, v in solver.labels.items()), device)
+def _train(solver, uncertainty, board: Board, tc, checkpoint: Path, resume_hint, threads) -> list[str]:
+    """Training (checkpoints on the way, not at the end), then the uncertainty; returns the signals received during
+    the uncertainty (which end it, not the results)."""
     try:
         solver.fit(checkpoint_every=tc.checkpoint_every, checkpoint_every_s=tc.checkpoint_every_s,
-                   checkpoint=checkpoint, on_eval=on_eval, on_step=on_step, progress=tc.progress,
+                   checkpoint=checkpoint, on_eval=board.on_eval, on_step=board.on_step, progress=tc.progress,
                    resume_hint=resume_hint, threads=threads, checkpoint_at_end=False)
         with stop_signals() as received:  # a signal ends the uncertainty, not the results
             estimated = uncertainty(solver, stop=lambda: bool(received))
@@ -158,29 +175,34 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
         solver.added.update(estimated.get("volumes", {}))
         solver.report.update(estimated.get("report", {}))
     except BaseException:
-        writer.close()
+        board.close()
         raise
+    return received
 
+
+def _write(solver, scene, out_dir: Path, board: Board, cfg: DictConfig, device: torch.device, rig_warnings: list[str],
+           records: WarningRecords, about: dict, times: dict, threads) -> dict:
+    """Every result and ``metrics.json`` (its ``warnings``: those given before, the rig's, the results', then every
+    one logged during the run, ``records``; ``times``:
+    ``setup_time_s``, and ``t_start`` for the total); where the disk refuses them, one sentence saying what is
+    there and what is not, the final state checkpointed where it still fits."""
+    checkpoint = out_dir / "checkpoint.pt"
     try:
-        def show(name: str, fig) -> None:  # the final slices and profiles in TensorBoard too, drawn once
-            writer.add_figure(name, fig, solver.iteration, close=False)
-
         try:
-            metrics = write_outputs(solver, scene, out_dir, losses, flame_above_K=cfg.metrics.flame_above_K,
-                                    show=show)
+            metrics = write_outputs(solver, scene, out_dir, board.losses, flame_above_K=cfg.metrics.flame_above_K,
+                                    show=board.show)
         finally:
-            writer.close()
+            board.close()
         about = dict(about or {})
-        earlier = about.pop("warnings", [])
-        said = earlier + rig_warnings + metrics.get("warnings", []) + records.messages
+        said = about.pop("warnings", []) + rig_warnings + metrics.get("warnings", []) + records.messages
         metrics["warnings"] = list(dict.fromkeys(said))
-        metrics.update(setup_time_s=setup_s, cpu_threads=torch.get_num_threads(),
+        metrics.update(setup_time_s=times["setup_time_s"], cpu_threads=torch.get_num_threads(),
                        device=str(device) if device.type == "cpu" else torch.cuda.get_device_name(device))
         metrics.update(threads.report() if threads is not None else {})
         if device.type == "cuda":
             metrics["gpu_peak_memory_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
         metrics["peak_memory_gib"] = peak_memory_gib()
-        metrics["total_time_s"] = time.perf_counter() - t_start
+        metrics["total_time_s"] = time.perf_counter() - times["t_start"]
         metrics.update(about)
         metrics["units"] = metric_units(metrics)
         write_json(metrics, out_dir / "metrics.json")
@@ -191,6 +213,24 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
         raise ValueError(f"writing the results to {out_dir} failed ({e.strerror or e}); it holds "
                          f"{', '.join(saved) or 'nothing'}, not {', '.join(missing)}: free some space and write "
                          "them again with train.resume=auto") from None
+    return metrics
+
+
+def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: WarningRecords, *, frame, start_from,
+                 t_start, about, resume_hint, threads) -> dict:
+    """:func:`reconstruct`, with the warnings logged meanwhile in ``records``."""
+    t_start = time.perf_counter() if t_start is None else t_start
+    torch.manual_seed(cfg.seed)
+    solver, uncertainty, scene, rig_warnings = _prepare(cfg, out_dir, device, frame)
+    checkpoint = out_dir / "checkpoint.pt"
+    _start(solver, cfg.train.resume, checkpoint, start_from)
+    setup_s = time.perf_counter() - t_start
+    board = Board(out_dir, solver, scene, cfg.train.image_every)
+    log.info("%s: %d views, %d rays; %s, device %s", cfg.data.name, scene.n_views, len(scene.dirs),
+             ", ".join(f"{k} {v}" for k, v in solver.labels.items()), device)
+    received = _train(solver, uncertainty, board, cfg.train, checkpoint, resume_hint, threads)
+    metrics = _write(solver, scene, out_dir, board, cfg, device, rig_warnings, records, about,
+                     {"setup_time_s": setup_s, "t_start": t_start}, threads)
     solver.checkpoint(checkpoint)  # after the results: on a nearly full disk, they take the room first
     print(summary_line(metrics, out_dir), flush=True)
     if received:

@@ -115,7 +115,7 @@ def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_v
     return tuple(np.clip(add_noise(x, noise_variance, generator).numpy(), 0.0, 1.0) for x in (reference, distorted))
 
 
-def check_settings(camera: Camera, rig_binning: int, pattern: dict, flow: dict, aperture_rays: int,
+def check_settings(camera: Camera, rig_binning: int, *, pattern: dict, flow: dict, aperture_rays: int,
                    noise_variance: float, image_binning: int, render_binning: int, luminosity: float,
                    gain_drift: float, gain_ramp: float, shake_px: float, burner_radius_mm: float, pixel_samples: int
                    ) -> None:
@@ -180,8 +180,10 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
     render_binning = render_binning or rig_binning
     measure = dict(measure or {"name": "default"})
     MEASUREMENT.get(measure["name"])
-    check_settings(cameras[0], rig_binning, pattern, flow, aperture_rays, noise_variance, image_binning, render_binning,
-                   luminosity, gain_drift, gain_ramp, shake_px, burner_radius_mm, pixel_samples)  # before the long work
+    check_settings(cameras[0], rig_binning, pattern=pattern, flow=flow, aperture_rays=aperture_rays,
+                   noise_variance=noise_variance, image_binning=image_binning, render_binning=render_binning,
+                   luminosity=luminosity, gain_drift=gain_drift, gain_ramp=gain_ramp, shake_px=shake_px,
+                   burner_radius_mm=burner_radius_mm, pixel_samples=pixel_samples)  # before the long work
     top_mm = -0.5 * float(box.extent_mm[1]) if burner_top_mm is None else float(burner_top_mm)
     step_mm = step_mm or box.voxel_mm
     field_key = hashlib.sha256(delta.cpu().numpy().tobytes()).hexdigest()
