@@ -222,9 +222,10 @@ def test_only_the_measured_part_is_compared_when_the_scene_says_so():
     d = t.scene.dirs[idx]
     assert float((full * d).sum(-1).abs().max()) > 1e-3 * float(full.norm(dim=-1).max())  # a field the box cuts
     t.scene = replace(t.scene, perpendicular_only=True)
+    t.renderer.perpendicular_only = True  # as a solver set up on such a scene renders
     measured = rendered(t, idx)
     torch.testing.assert_close(measured, full - (full * d).sum(-1, keepdim=True) * d)
-    t.stencil = "across"  # differences across each ray only: the same measurable part, to the stencil's O(h^2)
+    t.renderer.stencil = "across"  # differences across each ray only: the same measurable part, to the stencil's O(h^2)
     across = rendered(t, idx)
     assert float((across * d).sum(-1).abs().max()) < 1e-6 * float(full.norm(dim=-1).max())
     assert float((across - measured).norm(dim=-1).max()) < 0.01 * float(measured.norm(dim=-1).max())  # 0.0025
@@ -349,6 +350,7 @@ def test_the_field_evaluations_per_sample_follow_the_operators_and_the_stencil(o
 
     tr = neural_solver(*overrides)
     tr.scene = replace(tr.scene, perpendicular_only=perpendicular)
+    tr.renderer.perpendicular_only = perpendicular  # as a solver set up on such a scene renders
     assert tr.timing()["field_evaluations_per_sample"] == expected
 
 

@@ -6,7 +6,7 @@ from typing import Mapping, Optional
 import torch
 
 from nerif.renderers.gradients import GRADIENTS
-from nerif.renderers.samplers import Samples
+from nerif.renderers.samplers import Samples, UniformSampler
 
 
 def integrate(values: torch.Tensor, samples: Samples) -> torch.Tensor:
@@ -51,3 +51,56 @@ def render_deflections(field, samples: Samples, operators: Mapping[str, bool], s
         eps = integrate(g, samples)
         out[name] = eps if dirs is None else perpendicular(eps, dirs.to(eps.dtype))
     return out
+
+
+class DeflectionRenderer:
+    """How a neural field's deflections are rendered: by which gradient operators (``weights``: name -> its loss
+    weight; an operator of weight 0 is not trained on), with which central-difference ``step_mm`` and ``stencil``,
+    and, where only the part perpendicular to the rays is measured (``perpendicular_only``), projected; for training
+    (:meth:`train`, on a step's packed samples, with the graph the trained operators need) and for evaluation
+    (:meth:`evaluate`, on any rays, ``samples_per_ray`` uniform samples without jitter, no graph, bounded memory)."""
+
+    def __init__(self, weights: Mapping[str, float], stencil: str, step_mm: float, perpendicular_only: bool,
+                 samples_per_ray: int):
+        self.weights, self.stencil, self.step_mm = dict(weights), stencil, float(step_mm)
+        self.perpendicular_only = bool(perpendicular_only)
+        self.sampler = UniformSampler(samples_per_ray, jitter=False)
+
+    @property
+    def trained(self) -> dict:
+        """The operators trained on (weight above 0), each with its graph."""
+        return {name: True for name, w in self.weights.items() if w > 0}
+
+    @property
+    def fitted_operator(self) -> str:
+        """The gradient operator whose deflections are reported: discrete when it is trained on, else the first
+        trained one."""
+        return "discrete" if "discrete" in self.trained else next(iter(self.trained))
+
+    @property
+    def evaluations_per_sample(self) -> int:
+        """Field evaluations per sample of a training step: 1 for ``auto`` (plus its double backward), 6 for
+        ``discrete`` (4 with ``stencil=across`` on perpendicular-only data), summed over the trained operators."""
+        cost = {"auto": 1, "discrete": 4 if self.stencil == "across" and self.perpendicular_only else 6}
+        return sum(cost[n] for n in self.trained)
+
+    def _dirs(self, d: torch.Tensor) -> Optional[torch.Tensor]:
+        return d if self.perpendicular_only else None
+
+    def train(self, field, samples: Samples, dirs: torch.Tensor) -> dict:
+        """(n_rays, 3) deflections of a step's rays (``dirs``) by each trained operator, with their graphs."""
+        return render_deflections(field, samples, self.trained, self.step_mm, dirs=self._dirs(dirs),
+                                  stencil=self.stencil)
+
+    def evaluate(self, field, box, o: torch.Tensor, d: torch.Tensor, operators=("auto", "discrete")) -> dict:
+        """Deflections of sigma of rays (R, 3) from ``o`` along ``d`` through ``box`` by each operator, without any
+        parameter graph, in passes of at most 2^18 samples."""
+        out = {n: [] for n in operators}
+        chunk = max(1, min(4096, (1 << 18) // self.sampler.samples_per_ray))  # rays per pass: bounded memory
+        for i in range(0, len(d), chunk):
+            s = self.sampler(box, o[i:i + chunk], d[i:i + chunk])
+            eps = render_deflections(field, s, {n: False for n in operators}, self.step_mm,
+                                     dirs=self._dirs(d[i:i + chunk]), stencil=self.stencil)
+            for n in operators:
+                out[n].append(eps[n].detach())
+        return {n: torch.cat(v) if v else d.new_zeros(0, 3) for n, v in out.items()}

@@ -18,8 +18,7 @@ from nerif.data.phantoms import read_volume
 from nerif.field import (NeuralField, averaged_field, check_truth_within, fit_to_volume, prior_interval,
                          prior_saturation, prior_source)
 from nerif.losses import AmbientBoundary, TotalVariation, weighted_sum
-from nerif.renderers import SAMPLERS, render_deflections
-from nerif.renderers.samplers import UniformSampler
+from nerif.renderers import SAMPLERS, DeflectionRenderer
 from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_faces
 from nerif.solvers.batches import RayBatcher, check_views_per_batch
 from nerif.solvers.data_terms import DATA_TERMS
@@ -140,12 +139,13 @@ class NeuralSolver(IterativeSolver):
             self._warm_start(self.init_volume)
         self.average = averaged_field(self.field, self.ema_decay, self.rate) if self.ema_decay > 0 else None
         # central-difference step: b_min / (2 K), K the most samples per ray
-        self.step_mm = scene.box.shortest_side_mm / (2 * self.sampler.samples_per_ray)
+        self.renderer = DeflectionRenderer(self.weights, self.stencil,
+                                           scene.box.shortest_side_mm / (2 * self.sampler.samples_per_ray),
+                                           scene.perpendicular_only, self.sampler.samples_per_ray)
         self.samples_seen = 0
         self.rays_seen = 0
         self.samples_max = 0
         self.rays_skipped = 0
-        self._eval_sampler = UniformSampler(self.sampler.samples_per_ray, jitter=False)
         return self
 
     def _optimizer(self) -> torch.optim.AdamW:
@@ -272,11 +272,6 @@ class NeuralSolver(IterativeSolver):
         views' sentence where they say the fit failed)."""
         return prior_saturation(sigma, self.interval, self.scene.ambient, self.scene.truth_T, failed, self.prior_source)
 
-    # --- batches ---
-    def _measured(self, d: torch.Tensor) -> Optional[torch.Tensor]:
-        """Ray directions to project the rendered deflections with, when only their perpendicular part is measured."""
-        return d if self.scene.perpendicular_only else None
-
     # --- optimisation ---
     def batch_loss(self) -> tuple[dict, object]:
         """The loss of the next batch of the stage that holds :attr:`iteration` (its rays drawn from
@@ -286,9 +281,7 @@ class NeuralSolver(IterativeSolver):
         stage = self.plan.at(self.iteration)
         batch = stage.term.draw(self.iteration)
         samples = self.sampler(self.scene.box, batch.origins, batch.dirs, self.generator)
-        trained = {name: True for name, w in self.weights.items() if w > 0}
-        eps = render_deflections(self.field, samples, trained, self.step_mm, dirs=self._measured(batch.dirs),
-                                 stencil=self.stencil)
+        eps = self.renderer.train(self.field, samples, batch.dirs)
         terms = stage.term.terms(eps, batch, self.iteration)
         loss = weighted_sum(terms, self.weights)
         named = {f"loss_{n}": t for n, t in terms.items()}
@@ -356,43 +349,19 @@ class NeuralSolver(IterativeSolver):
 
     def render(self, o: torch.Tensor, d: torch.Tensor, operators=("auto", "discrete")) -> dict:
         """Deflections of sigma of rays (R, 3) by each operator, without any parameter graph."""
-        out = {n: [] for n in operators}
-        chunk = max(1, min(4096, (1 << 18) // self._eval_sampler.samples_per_ray))  # rays per pass: bounded memory
-        field = self.estimate
-        for i in range(0, len(d), chunk):
-            s = self._eval_sampler(self.scene.box, o[i:i + chunk], d[i:i + chunk])
-            eps = render_deflections(field, s, {n: False for n in operators}, self.step_mm,
-                                     dirs=self._measured(d[i:i + chunk]), stencil=self.stencil)
-            for n in operators:
-                out[n].append(eps[n].detach())
-        return {n: torch.cat(v) if v else d.new_zeros(0, 3) for n, v in out.items()}
+        return self.renderer.evaluate(self.estimate, self.scene.box, o, d, operators)
 
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
-        """Deflections of sigma by the operator training fits (:attr:`fitted_operator`)."""
-        op = self.fitted_operator
+        """Deflections of sigma by the operator training fits (:attr:`DeflectionRenderer.fitted_operator`)."""
+        op = self.renderer.fitted_operator
         return self.render(origins, dirs, (op,))[op]
-
-    @property
-    def evaluations_per_sample(self) -> int:
-        """Field evaluations per sample of a training step: 1 for ``auto`` (plus its double backward), 6 for
-        ``discrete`` (4 with ``stencil=across`` on perpendicular-only data), summed over the trained operators."""
-        across = self.stencil == "across" and self.scene.perpendicular_only
-        cost = {"auto": 1, "discrete": 4 if across else 6}
-        return sum(cost[n] for n, w in self.weights.items() if w > 0)
-
-    @property
-    def fitted_operator(self) -> str:
-        """The gradient operator whose deflections are reported: discrete when it is trained on, else the first
-        trained one."""
-        trained = [n for n, w in self.weights.items() if w > 0]
-        return "discrete" if "discrete" in trained else trained[0]
 
     def evaluate(self) -> dict:
         """Metrics now: temperature/sigma errors on the grid (when the truth is known), deflection errors."""
         ev = self.evaluation
         m = {"iteration": self.iteration, "wall_time_s": self.train_seconds, **ev.field_errors(self.reconstruction()),
              **ev.deflection_errors(self.render(*ev.train_rays()))}
-        m["deflection_rmse"] = m[f"deflection_rmse_{self.fitted_operator}"]
+        m["deflection_rmse"] = m[f"deflection_rmse_{self.renderer.fitted_operator}"]
         m.update(ev.heldout_errors(self.predict))
         self.history.append(m)
         rmses = [h["deflection_rmse"] for h in self.history]
@@ -462,6 +431,6 @@ class NeuralSolver(IterativeSolver):
 
     def timing(self) -> dict:
         return {**super().timing(), "samples_per_second": self.samples_seen / max(self.train_seconds, 1e-9),
-                "field_evaluations_per_sample": self.evaluations_per_sample,
+                "field_evaluations_per_sample": self.renderer.evaluations_per_sample,
                 "samples_per_ray_mean": self.samples_seen / max(self.rays_seen, 1), "samples_per_ray_max": self.samples_max,
                 "rays_skipped_fraction": self.rays_skipped / max(self.rays_seen, 1)}
