@@ -140,6 +140,22 @@ def image_pixels(root: str) -> tuple[float, str]:
     return float(rig.n_views * w * h), f"the views in {rig.path} (fewer views, or images cropped to the flame)"
 
 
+def _record_exposures(measured, cached, cache_dir, distorted, references, noise, ref_noise) -> None:
+    """Each view's measurement told (its ``found``) whether it was read from the cache, how many exposures each
+    of its images averaged and the noise of their means; the log says so where it matters."""
+    if any(cached):
+        log.info("measurements of %d of %d views read from the cache in %s (the same images, masks and settings "
+                 "measured before; data.cache_dir=null measures again)", sum(cached), len(cached), cache_dir)
+    for m, c in zip(measured, cached):
+        m.found["from_cache"] = bool(c)
+    for m, d, r, nd, nr in zip(measured, distorted, references, noise, ref_noise):  # K exposures averaged per image
+        m.found.update(exposures=[len(d), len(r)], image_noise=nd, reference_noise=nr)
+    if any(len(f) > 1 for f in distorted + references):
+        log.info("exposures averaged per view: %s distorted, %s reference; noise of the means %s",
+                 "/".join(str(len(f)) for f in distorted), "/".join(str(len(f)) for f in references),
+                 ", ".join("-" if n is None else f"{100 * n:.2f} %" for n in noise))
+
+
 @DATASETS.register("capture")
 def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto", heldout: Optional[list] = None,
             frames=None, frame: Optional[int] = None, truth: Optional[str] = None, cache_dir=None,
@@ -172,11 +188,9 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
     files = [p for exposed in distorted + references for p in exposed]
     check_images(files + flame, rig.sensor_px)  # one bit depth for all, from the headers
     full, cameras, roi, rays = rig_geometry(rig, binning, device)
-    if heldout is not None:
-        held = heldout_views(heldout, len(cameras), "data.heldout")
-    else:
-        held = heldout_views([len(cameras) - 1] if rig.heldout is None else list(rig.heldout), len(cameras),
-                             f"{rig.path}: heldout")
+    held = (heldout_views(heldout, len(cameras), "data.heldout") if heldout is not None else
+            heldout_views([len(cameras) - 1] if rig.heldout is None else list(rig.heldout), len(cameras),
+                          f"{rig.path}: heldout"))
     prior = sigma_prior(rig, rig.ambient)
     truth_T = read_truth(truth, rig.box) if truth is not None else None
     lossy = lossy_images(files)
@@ -192,17 +206,7 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
                                             flame=flames[v], hidden=hidden[v], grid_px=(cam.height, cam.width),
                                             region=roi, quiet=quiet[v])
                              for v, cam in enumerate(cameras)])
-    if any(cached):
-        log.info("measurements of %d of %d views read from the cache in %s (the same images, masks and settings "
-                 "measured before; data.cache_dir=null measures again)", sum(cached), len(cached), cache_dir)
-    for m, c in zip(measured, cached):
-        m.found["from_cache"] = bool(c)
-    for m, d, r, nd, nr in zip(measured, distorted, references, noise, ref_noise):  # K exposures averaged per image
-        m.found.update(exposures=[len(d), len(r)], image_noise=nd, reference_noise=nr)
-    if any(len(f) > 1 for f in distorted + references):
-        log.info("exposures averaged per view: %s distorted, %s reference; noise of the means %s",
-                 "/".join(str(len(f)) for f in distorted), "/".join(str(len(f)) for f in references),
-                 ", ".join("-" if n is None else f"{100 * n:.2f} %" for n in noise))
+    _record_exposures(measured, cached, cache_dir, distorted, references, noise, ref_noise)
     views = [ViewImages(torch.as_tensor(r, device=device), torch.as_tensor(m.distorted, device=device), cam)
              for r, m, cam in zip(refs, measured, full)]
     causes = [m.left_out for m in measured]

@@ -233,6 +233,44 @@ def _read_rig_file(path: Path) -> RigFile:
                          "per view or a single shared file")
     refs = [_exposures_entry(r, f"{path}: views.references[{v}]")
             for v, r in enumerate(refs if isinstance(refs, list) else [refs] * len(angles))]
+    box, ambient = _probe_and_ambient(path, rig)
+    roi = _integers(roi, 4, f"{path}: roi_px (x, y, width, height)")
+    held = rig.get("heldout")
+    if held is not None:
+        held = _integers(held, None, f"{path}: heldout")
+    flame, occluders = _per_view_images(path, rig, len(angles))
+    t_range = rig.get("temperature_range_K")
+    if t_range is not None:
+        lo, hi = _numbers(t_range, f"{path}: temperature_range_K") if isinstance(t_range, list) and \
+            len(t_range) == 2 else (0.0, 0.0)
+        if not 0 < lo < hi:
+            raise ValueError(f"{path}: temperature_range_K {t_range} must be two increasing positive temperatures [K]")
+    return RigFile(path, int(rig["version"]), (int(w), int(h)), angles,
+                   tuple(refs), frames, roi, box, ambient, held,
+                   (lo, hi) if t_range is not None else None, lens, calibrated,
+                   (path,) + ((path.parent / str(rig["calibration"]),) if "calibration" in rig else ()),
+                   tuple(str(f) for f in flame) if flame is not None else None,
+                   tuple(occluders) if occluders is not None else None)
+
+
+def _per_view_images(path: Path, rig: dict, n_views: int) -> tuple[Optional[list], Optional[list]]:
+    """The rig file's ``flame_only`` and ``occluders`` lists (None where absent), each checked to list one image per
+    view (an occluder mask may be null)."""
+    flame = rig.get("flame_only")
+    if flame is not None and (not isinstance(flame, list) or len(flame) != n_views):
+        raise ValueError(f"{path}: flame_only must list one image per view ({n_views}), each the view's exposure "
+                         "of the flame with the background switched off")
+    occluders = rig.get("occluders")
+    if occluders is not None and (not isinstance(occluders, list) or len(occluders) != n_views
+                                  or not all(o is None or isinstance(o, str) for o in occluders)):
+        raise ValueError(f"{path}: occluders must list one mask image per view ({n_views}; null for a view with "
+                         "none), nonzero where something hides the background")
+    return flame, occluders
+
+
+def _probe_and_ambient(path: Path, rig: dict) -> tuple[ProbeBox, Ambient]:
+    """The rig file's probe grid and ambient gas (with ``T_max``), checked: voxel counts, a temperature in kelvin,
+    a gas's refractive index."""
     probe, amb = _need(rig, "probe", str(path)), _need(rig, "ambient", str(path))
     shape = _integers(_need(probe, "shape", f"{path} probe"), 3, f"{path}: probe.shape")
     if min(shape) < 1:
@@ -246,32 +284,7 @@ def _read_rig_file(path: Path) -> RigFile:
     if not 1.0 < n0 < 1.01:
         raise ValueError(f"{path}: ambient.n0 = {amb['n0']} must be a gas's refractive index, just above 1 (air: "
                          "1.00027)")
-    ambient = Ambient(t0, n0, _positive(_optional(rig, "T_max", 2000.0), f"{path}: T_max"))
-    roi = _integers(roi, 4, f"{path}: roi_px (x, y, width, height)")
-    held = rig.get("heldout")
-    if held is not None:
-        held = _integers(held, None, f"{path}: heldout")
-    flame = rig.get("flame_only")
-    if flame is not None and (not isinstance(flame, list) or len(flame) != len(angles)):
-        raise ValueError(f"{path}: flame_only must list one image per view ({len(angles)}), each the view's exposure "
-                         "of the flame with the background switched off")
-    occluders = rig.get("occluders")
-    if occluders is not None and (not isinstance(occluders, list) or len(occluders) != len(angles)
-                                  or not all(o is None or isinstance(o, str) for o in occluders)):
-        raise ValueError(f"{path}: occluders must list one mask image per view ({len(angles)}; null for a view with "
-                         "none), nonzero where something hides the background")
-    t_range = rig.get("temperature_range_K")
-    if t_range is not None:
-        lo, hi = _numbers(t_range, f"{path}: temperature_range_K") if isinstance(t_range, list) and \
-            len(t_range) == 2 else (0.0, 0.0)
-        if not 0 < lo < hi:
-            raise ValueError(f"{path}: temperature_range_K {t_range} must be two increasing positive temperatures [K]")
-    return RigFile(path, int(rig["version"]), (int(w), int(h)), angles,
-                   tuple(refs), frames, roi, box, ambient, held,
-                   (lo, hi) if t_range is not None else None, lens, calibrated,
-                   (path,) + ((path.parent / str(rig["calibration"]),) if "calibration" in rig else ()),
-                   tuple(str(f) for f in flame) if flame is not None else None,
-                   tuple(occluders) if occluders is not None else None)
+    return box, Ambient(t0, n0, _positive(_optional(rig, "T_max", 2000.0), f"{path}: T_max"))
 
 
 def _arc_lens(path: Path, rig: dict) -> tuple[ArcLens, tuple[int, int]]:

@@ -44,6 +44,19 @@ def synthetic_frames(phantom: dict, frames=None, frame_rate_hz: float = 250.0, *
     return [Frame(k, float(phantom["time_s"]) + k / float(frame_rate_hz)) for k in pick_frames(frames)]
 
 
+def _rendered_scene(ph, ambient: Ambient, cameras: list, rays: tuple, eps: torch.Tensor, record, sensing: str) -> Scene:
+    """The scene of deflections ``eps`` (N, 3) rendered along ``rays`` (origins, dirs, pixel, view_start) of the
+    phantom ``ph``; a ray the sensing could not render is unknown (left out, its pixel not valid)."""
+    origins, dirs, pixel, view_start = rays
+    keep = torch.as_tensor(finite_or_masked(eps.cpu().numpy(), f"{sensing} sensing"), device=eps.device)
+    views = views_of(cameras)
+    if not keep.all():
+        views = views_of(cameras, valid=kept_pixels(cameras, pixel, view_start, keep))
+        dirs, eps, pixel, view_start = keep_rays(dirs, eps, pixel, view_start, keep)
+    return Scene(box=ph.box, ambient=ambient, views=views, origins=origins, dirs=dirs, eps=eps, pixel=pixel,
+                 view_start=view_start, truth_T=ph.T, sensing=record, perpendicular_only=sensing != "ideal")
+
+
 @DATASETS.register("synthetic", hints={"binning": "rig.binning"})
 def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", sensor: Optional[dict] = None,
               render_supersample: int = 4, render_step_mm: Optional[float] = None, cache_dir: Optional[str] = None,
@@ -98,14 +111,8 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
         scene = replace(measured_scene(ph, ambient, cameras, (origins, dirs, pixel, view_start), record, sensor, device),
                         cache_dir=cache_dir)
     else:
-        eps = torch.as_tensor(arrays["eps"], device=device)
-        keep = torch.as_tensor(finite_or_masked(eps.cpu().numpy(), f"{sensing} sensing"), device=device)
-        views = views_of(cameras)
-        if not keep.all():  # a ray the sensing could not render is unknown
-            views = views_of(cameras, valid=kept_pixels(cameras, pixel, view_start, keep))
-            dirs, eps, pixel, view_start = keep_rays(dirs, eps, pixel, view_start, keep)
-        scene = Scene(box=ph.box, ambient=ambient, views=views, origins=origins, dirs=dirs, eps=eps, pixel=pixel,
-                      view_start=view_start, truth_T=ph.T, sensing=record, perpendicular_only=sensing != "ideal")
+        scene = _rendered_scene(ph, ambient, cameras, (origins, dirs, pixel, view_start),
+                                torch.as_tensor(arrays["eps"], device=device), record, sensing)
     if deflection_noise > 0:  # each frame of a series has noise of its own, as each exposure does
         seed = noise_seed if frame is None else noise_seed + 7919 * (int(frame) + 1)
         eps = with_noise(scene.eps, scene.dirs if scene.perpendicular_only else None, deflection_noise, seed)

@@ -73,6 +73,14 @@ class DivergenceError(RuntimeError):
     """The loss became NaN or infinite."""
 
 
+def _kept(checkpoint: Optional[Path]) -> str:
+    """What a diverged run leaves: the last checkpoint (the step that diverged is never saved), or none yet."""
+    if checkpoint is not None and Path(checkpoint).is_file():
+        iteration = torch.load(checkpoint, weights_only=False)["iteration"]
+        return f"the checkpoint of iteration {iteration} is kept ({checkpoint})"
+    return "no checkpoint had been saved yet"
+
+
 class Interrupted(KeyboardInterrupt):
     """Ctrl-C, SIGTERM (Slurm preemption, ``timeout``, a container stop) or SIGUSR2 (Slurm's and submitit's
     warning before the time limit) during a run: the work done so far is saved."""
@@ -360,10 +368,7 @@ class IterativeSolver:
                 log.warning("%s at iteration %d: nothing to save", what, self.iteration)
             raise Interrupted(what) from None
         except DivergenceError as e:
-            kept = (f"the checkpoint of iteration {torch.load(checkpoint, weights_only=False)['iteration']} is kept "
-                    f"({checkpoint})" if checkpoint is not None and Path(checkpoint).is_file()
-                    else "no checkpoint had been saved yet")
-            raise DivergenceError(f"{e.args[0]}; {kept}") from None
+            raise DivergenceError(f"{e.args[0]}; {_kept(checkpoint)}") from None
         finally:
             bar.close()
         return last
