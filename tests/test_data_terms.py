@@ -321,3 +321,9 @@ def test_a_ray_through_a_single_pixel_has_that_pixels_direction_and_the_term_is_
         return sum(float(term.terms({"discrete": a * e}, b, 0)["discrete"]) for e, b in zip(true, batches))
 
     assert cost(1.0) < 0.8 * min(cost(0.5), cost(1.5)) and cost(1.0) < 0.35 * cost(0.0)
+
+
+def test_rays_at_pixels_with_a_patch_other_than_two_is_refused_before_any_image_is_read():
+    with pytest.raises(ValueError, match="render_at=pixels renders one ray a cell of 2 x 2 rays: set data_term.patch=2"):
+        DATA_TERMS.build({"name": "images", "render_at": "pixels", "patch": 4})
+    assert DATA_TERMS.build({"name": "images", "render_at": "pixels", "patch": 2}).at_pixels

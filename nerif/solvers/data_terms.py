@@ -231,6 +231,8 @@ class ImageTerm(DeflectionTerm):
         self.pixels_per_cell = pixels_per_cell
         if render_at not in ("corners", "pixels"):
             raise ValueError(f"data_term.render_at must be corners or pixels, got '{render_at}'")
+        if render_at == "pixels" and patch != 2:  # before the set-up reads every view's images
+            raise ValueError("data_term.render_at=pixels renders one ray a cell of 2 x 2 rays: set data_term.patch=2")
         self.at_pixels = render_at == "pixels"
         self.flow = DeflectionTerm(noise_weighted)
 
@@ -287,8 +289,6 @@ class ImageTerm(DeflectionTerm):
         cells = batches.rays_per_batch if self.at_pixels else max(1, batches.rays_per_batch // (k * k))
         self.batches = RayBatcher(scene, masks.inside if masks is not None else None, cells,
                                   batches.views_per_batch, batches.outside_fraction, batches.generator, allowed)
-        if self.at_pixels and k != 2:
-            raise ValueError("data_term.render_at=pixels renders one ray a cell of 2 x 2 rays: set data_term.patch=2")
         return self
 
     @staticmethod

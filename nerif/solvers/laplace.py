@@ -67,7 +67,8 @@ class LaplaceApproximation:
         for _ in range(self.batches):
             if stop is not None and stop():
                 return {}
-            grads = torch.autograd.grad(draw.batch_loss()[0]["loss"], params, allow_unused=True)
+            # the iteration does not advance: an occupancy update due at it would run on every batch
+            grads = torch.autograd.grad(draw.batch_loss(update_occupancy=False)[0]["loss"], params, allow_unused=True)
             for c, g in zip(curvature, grads):
                 if g is not None:
                     c.add_(g.detach().pow(2), alpha=1.0 / self.batches)

@@ -273,11 +273,13 @@ class NeuralSolver(IterativeSolver):
         return prior_saturation(sigma, self.interval, self.scene.ambient, self.scene.truth_T, failed, self.prior_source)
 
     # --- optimisation ---
-    def batch_loss(self) -> tuple[dict, object]:
+    def batch_loss(self, update_occupancy: bool = True) -> tuple[dict, object]:
         """The loss of the next batch of the stage that holds :attr:`iteration` (its rays drawn from
-        :attr:`generator`, the occupancy grid updated first), with its graph to the field's parameters: ``loss``
-        (the weighted sum), ``loss_<term>`` of the data term, ``loss_boundary``, ``loss_tv``; and the samples."""
-        self.sampler.update(self.scene.box, self.occupancy_value, self.iteration, self.generator)
+        :attr:`generator`, the occupancy grid updated first where it is due and ``update_occupancy``), with its graph
+        to the field's parameters: ``loss`` (the weighted sum), ``loss_<term>`` of the data term, ``loss_boundary``,
+        ``loss_tv``; and the samples."""
+        if update_occupancy:
+            self.sampler.update(self.scene.box, self.occupancy_value, self.iteration, self.generator)
         stage = self.plan.at(self.iteration)
         batch = stage.term.draw(self.iteration)
         samples = self.sampler(self.scene.box, batch.origins, batch.dirs, self.generator)
