@@ -94,7 +94,7 @@ def main() -> None:
         rows[name] = {"ms_per_iteration": float(np.median(steps)), "ms_p10": float(np.percentile(steps, 10)),
                       "ms_p90": float(np.percentile(steps, 90)),
                       "peak_memory_gib": torch.cuda.max_memory_allocated(device) / 2**30 if device.type == "cuda" else None,
-                      "samples_per_ray": solver.samples_seen / max(solver.rays_seen, 1)}
+                      "samples_per_ray": solver.counts.samples_seen / max(solver.counts.rays_seen, 1)}
         print(f"{name}: {rows[name]['ms_per_iteration']:.2f} ms/it (p10 {rows[name]['ms_p10']:.2f}, "
               f"p90 {rows[name]['ms_p90']:.2f})", flush=True)
         if args.profile:

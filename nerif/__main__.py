@@ -41,7 +41,7 @@ def check_overrides(cfg: DictConfig, overrides) -> None:
         defaults = None
     if defaults is not None:
         check_kinds(cfg, defaults, overrides)
-    if cfg.data.name == "synthetic":
+    if "rig" in cfg.data:  # the dataset builds its cameras from the rig group
         return
     ignored = [o for o in overrides if o.lstrip("+~").startswith("rig.")]
     if ignored:

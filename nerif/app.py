@@ -13,13 +13,12 @@ import torch
 from omegaconf import DictConfig
 
 from nerif.configs import check_complete, group
-from nerif.data.capture import image_pixels, probe_voxels
+from nerif.data import DATASETS
 from nerif.io.folders import check_writable, run_folder
 from nerif.memory import check_memory
 from nerif.reconstruct import WarningRecords, reconstruct, resuming
-from nerif.sensing.interpolation import INTERPOLATIONS
 from nerif.sequence import frames_of, run_sequence
-from nerif.solvers.base import check_train
+from nerif.solvers.base import SOLVERS, check_train
 from nerif.threads import ThreadTuner, resolve_threads, usable_cores
 
 DEVICES = "auto, cpu, cuda or cuda:N"
@@ -70,12 +69,20 @@ def unexpected(e: BaseException, debug: str) -> str:
     return f"nerif stopped on {type(e).__name__}: {first or 'no message'} (add {debug} to see where it arose)"
 
 
+def allocations(cfg: DictConfig) -> list[tuple[str, str, float]]:
+    """What the run configured by ``cfg`` will allocate, as its dataset and its solver declare it (:mod:`nerif.memory`):
+    ``(what, the key that sets it, bytes)`` each."""
+    return DATASETS.allocations(cfg, "data") + SOLVERS.allocations(cfg, "solver")
+
+
 def check_outside_capture(cfg: DictConfig, out_dir: Path) -> None:
-    """One sentence where the run would write into the capture folder it reads: its images (``slices.png``, ...)
-    would then be read as unlisted views by the next run."""
-    if cfg.data.name != "capture" or cfg.data.root in (None, "???"):
+    """One sentence where the run would write into the folder its data are read from (``data.root``, of any dataset
+    that reads one): the run's images (``slices.png``, ...) would mix with the data's, and a capture reads every image
+    of its folder as a view."""
+    root = cfg.data.get("root")
+    if root in (None, "???"):
         return
-    root, out = Path(str(cfg.data.root)).expanduser().resolve(), Path(out_dir).resolve()
+    root, out = Path(str(root)).expanduser().resolve(), Path(out_dir).resolve()
     if out == root or root in out.parents:
         raise ValueError(f"hydra.run.dir={out_dir} is inside the capture folder data.root={cfg.data.root}: its images "
                          "would be read as views by the next run; write the run elsewhere")
@@ -91,14 +98,7 @@ def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     check_complete(cfg)
     check_train(group(cfg, "train"), cfg.seed)
     device = resolve_device(cfg.device)
-    capture = cfg.data.name == "capture"
-    read = cfg.data_term.get("interpolation") if cfg.solver.name == "nerif" else None
-    if read and read not in INTERPOLATIONS.names():
-        raise ValueError(f"data_term.interpolation={read}: not an interpolation nerif has ("
-                         f"{', '.join(INTERPOLATIONS.names())})")
-    check_memory(cfg, device, probe=probe_voxels(cfg.data.root) if capture else None,
-                 images=image_pixels(cfg.data.root) if capture else None,
-                 grid_factor=INTERPOLATIONS.get(read).factor if read else 1)
+    check_memory(allocations(cfg), device)
     with WarningRecords() as early:  # what the log warns of before the data is read goes to metrics.json too
         threads = resolve_threads(cfg.threads, parallel_jobs)
     torch.set_num_threads(threads)

@@ -18,6 +18,19 @@ from nerif.data.observation import observations
 from nerif.losses.images import bandpass, photometric_residual
 from nerif.metrics import deflection_rmse, explained_share, flame_region, psnr_db, rmse, value_range
 from nerif.sensing.interpolation import Bicubic, Interpolation
+from nerif.units import DEFLECTION, SIGMA, declare
+
+declare(deflection_rmse=DEFLECTION, deflection_rmse_auto=DEFLECTION, deflection_rmse_discrete=DEFLECTION,
+        heldout_deflection_rmse=DEFLECTION, sigma_rmse=SIGMA,
+        sigma_relative_error="1 (RMS of sigma - sigma_true over RMS of sigma_true, the whole box)",
+        heldout_explained="1 (share of the held-out displacements' mean square the fit explains; 1 perfect, below 0 "
+                          "worse than no flame)",
+        heldout_photometric_rmse="1 (share of the images' full range)",
+        heldout_photometric_rmse_flow="1 (share of the images' full range)",
+        heldout_photometric_rmse_none="1 (share of the images' full range)",
+        heldout_misfit="px (the held-out displacement RMSE; sigma where there is no temperature)",
+        heldout_image_misfit="1 (share of the images' full range: the held-out image residual, both images band-passed "
+                             "and the reference read as the image term compares them)")
 
 READ = Bicubic()  # how the held-out image residual reads the reference (a monitored figure, kept as it was)
 Predict = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (R, 3) origins [mm], dirs -> (R, 3) sigma units
@@ -148,11 +161,10 @@ class Evaluation:
         set (:func:`~nerif.losses.images.bandpass`: as the image term compares them)."""
         h = self.scene.heldout
         views, total, count = h.ray_views()[index], 0.0, 0
-        u_all = h.to_displacement(eps.double(), index) + h.shake_px()[views]  # px of the full sensor, the shake in
         models = observations(h)
         for v in views.unique().tolist():
             sel, view = views == v, models[v]
-            u = view.image_px(u_all[sel])
+            u = view.displacement(eps[sel].double() / h.scale, index[sel] - view.rays.start)
             x = view.pixels(h.pixel[index[sel]])  # (R, b^2, 2)
             u = u[:, None, :].expand(-1, x.shape[1], -1)
             ref, dist = (bandpass(i.double(), highpass_px, lowpass_px) for i in (view.reference, view.distorted))
@@ -178,6 +190,19 @@ class Evaluation:
         if self.scene.truth_T is not None:
             out.update(self.field_errors(sigma()))
         return out
+
+    @staticmethod
+    def failed(m: dict) -> str:
+        """One sentence where the held-out views say the fit failed: its prediction explains their images, or their
+        displacements, worse than no flame at all would (``heldout_*`` against ``heldout_*_none`` of ``m``, the
+        figures of :meth:`heldout_errors` on every held-out ray); else ""."""
+        for key, what in (("heldout_photometric_rmse", "images"), ("heldout_displacement_rmse_px", "displacements")):
+            fit, none = m.get(key), m.get(f"{key}_none")
+            if fit is not None and none is not None and fit > none:
+                return (f"the fit failed: it explains the held-out view's {what} worse than no flame at all ({key} "
+                        f"{fit:.4g} against {none:.4g}); its temperatures mean nothing. Look at the measurement "
+                        "lines of the log (shakes, pixels left out) and at heldout/*.png")
+        return ""
 
     def heldout_images(self, pred: torch.Tensor) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per held-out view, (observed, predicted) on its pixel grid, NaN where it has no ray: displacements

@@ -13,8 +13,11 @@ from torch.optim.swa_utils import AveragedModel
 
 from nerif.geometry import ProbeBox
 from nerif.physics import Ambient
+from nerif.units import SHARE, declare
 
 log = logging.getLogger(__name__)
+
+declare(box_at_cold_bound=SHARE, flame_at_prior_bound=SHARE)
 
 
 class NeuralField(nn.Module):
@@ -71,6 +74,16 @@ class NeuralField(nn.Module):
         pts = torch.as_tensor(box.centres().reshape(-1, 3), dtype=torch.float32, device=dev)
         out = torch.cat([self(pts[i:i + chunk]) for i in range(0, len(pts), chunk)])
         return out.reshape(box.shape)
+
+
+def perturb_tables(field: NeuralField, share: float, generator: torch.Generator) -> None:
+    """Add to each of ``field``'s encoder parameters Gaussian noise of ``share`` times its own RMS (drawn from
+    ``generator``), in place: an ensemble's member starts from a perturbed field, and what the data pin down is
+    pulled back by its training while what they leave free stays perturbed."""
+    with torch.no_grad():
+        for p in field.encoder.parameters():
+            noise = torch.randn(p.shape, generator=generator, device=p.device, dtype=p.dtype)
+            p.add_(noise * (share * p.pow(2).mean().sqrt()))
 
 
 def fit_to_volume(field: NeuralField, box: ProbeBox, sigma: torch.Tensor, iterations: int, *, lr: float = 5e-3,
@@ -194,7 +207,7 @@ def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Amb
     data it cannot explain: deflections of the wrong sign, or a geometry that does not match the images; normal
     runs leave none there, the multicam capture read without its lens model 2 %). With a known truth
     (``truth_T`` [K]) far from the hot bound, a flame at that bound is said to be a fit gone astray instead; so it is
-    where the held-out views say the fit failed (``failed``: :func:`nerif.io.outputs.failed_fit`'s sentence): the
+    where the held-out views say the fit failed (``failed``: :meth:`nerif.evaluation.Evaluation.failed`'s sentence): the
     data then do not support a hotter flame, and raising the bound is not the advice."""
     a, b = prior
     flame = sigma < -0.05

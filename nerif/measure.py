@@ -59,9 +59,9 @@ def measure_pair(reference: Path, distorted: Path, ray_px: int = 8, flow: str = 
                "kept": float(m.valid.mean()),
                **{f"left_out_{c.replace(' ', '_')}": float(np.mean(m.left_out == k)) for k, c in enumerate(CAUSES) if k},
                "vector_noise_px": vector_noise(m.displacement, m.valid),
-               "displacement_max_px": m.found["displacement_max_px"], "shake_px": m.found["shake_px"],
-               "image_noise": m.found["noise"], "texture_scale_px": texture_scale_px(ref),
-               "flow_normalise_px": m.found["normalise_px"], "flow_factor": m.found["flow_factor"],
+               "displacement_max_px": m.found.displacement_max_px, "shake_px": m.found.shake_px,
+               "image_noise": m.found.noise, "texture_scale_px": texture_scale_px(ref),
+               "flow_normalise_px": m.found.normalise_px, "flow_factor": m.found.flow_factor,
                "measure_time_s": seconds,
                "units": "px: image pixels of the pair; shares: of the ray grid; image_noise: of full scale"}
     return m, ref, figures

@@ -18,14 +18,16 @@ from nerif.data import DATASETS
 from nerif.data.diagnostics import check_sign, ill_posed
 from nerif.export import write_json
 from nerif.io.outputs import RESULTS, summary_line, volume_slices, write_masks, write_outputs, write_sensing
-from nerif.io.units import metric_units
 from nerif.masks import MASKS
 from nerif.sensing.measurement import CAUSES
 from nerif.solvers import SOLVERS, Interrupted
 from nerif.solvers.base import stop_signals
 from nerif.solvers.uncertainty import UNCERTAINTY
+from nerif.units import declare, metric_units
 
 log = logging.getLogger(__name__)
+
+declare(text=("device", "warnings"))
 _PACKAGE = Path(__file__).resolve().parent  # nerif's own code, whose Python warnings a run records
 
 
@@ -125,9 +127,13 @@ class Board:
                                                            f"iteration {it}"), it)
         self.writer.flush()
 
-    def show(self, name: str, fig) -> None:
-        """The final slices and profiles in TensorBoard too, drawn once."""
-        self.writer.add_figure(name, fig, self.solver.iteration, close=False)
+    def show(self, name: str, png: bytes) -> None:
+        """The final slices and profiles in TensorBoard too, as their files hold them (``png``: the PNG's bytes)."""
+        import io
+
+        from matplotlib.image import imread
+
+        self.writer.add_image(name, imread(io.BytesIO(png), format="png"), self.solver.iteration, dataformats="HWC")
 
     def close(self) -> None:
         self.writer.close()

@@ -40,12 +40,17 @@ class Registry:
         self._entries: dict[str, Callable[..., Any]] = {}
         self._hints: dict[str, dict[str, str]] = {}
 
-    def register(self, name: str, hints: Optional[Mapping[str, str]] = None):
+    def register(self, name: str, hints: Optional[Mapping[str, str]] = None,
+                 allocations: Optional[Callable[[Mapping], list]] = None):
         """Decorator registering a component as ``name``; ``hints``: settings users may look for here, mapped to
-        where they really are (``{"binning": "rig.binning"}``), for the message that refuses them."""
+        where they really are (``{"binning": "rig.binning"}``), for the message that refuses them;
+        ``allocations``: what the component will allocate in a run (:meth:`allocations`), for an entry that cannot
+        say it itself (a function; a class says it with a static method ``allocations(cfg)``)."""
         def decorator(obj):
             if name in self._entries:
                 raise ValueError(f"{self.family} '{name}' is registered twice")
+            if allocations is not None:
+                obj.allocations = allocations
             self._entries[name] = obj
             self._hints[name] = dict(hints or {})
             return obj
@@ -83,6 +88,13 @@ class Registry:
         entry = self.get(name)
         self._check_settings(name, entry, params)
         return entry(**params, **extra)
+
+    def allocations(self, cfg: Mapping[str, Any], group: str) -> list:
+        """What the entry that the run's config ``cfg`` picks in its ``group`` declares it will allocate:
+        ``(what, the key that sets it, bytes)`` of its largest allocations (:mod:`nerif.memory`), none where it
+        declares nothing."""
+        declared = getattr(self.get(cfg[group]["name"]), "allocations", None)
+        return list(declared(cfg)) if declared is not None else []
 
     def _check_settings(self, name: str, entry: Callable[..., Any], params: Mapping[str, Any]) -> None:
         """One sentence for a setting the entry does not take (a stray ``+key=value`` or a misspelling)."""

@@ -30,13 +30,17 @@ from nerif.data.frames import FRAMES, Frame
 from nerif.geometry import ProbeBox
 from nerif.export import write_json, write_pvd
 from nerif.io.outputs import summary_line
-from nerif.io.units import metric_units
 from nerif.io.plots import save_figure, sequence_figure, slice_figure
 from nerif.io.summary import COLUMNS, write_tables
 from nerif.reconstruct import reconstruct, resuming
 from nerif.solvers import SOLVERS
+from nerif.units import declare, metric_units
 
 log = logging.getLogger(__name__)
+
+declare(n_frames="frames", frames_finished="frames", time_s="s", frame="(index)",
+        text=("note", "frame_folder", "warm_start", "folder", "error"),
+        containers={"frames": "(one row a frame, each unit by its name here)"})
 # a frame's headline metrics: the multirun table's columns, and the held-out PSNR its summary line prints
 FINAL_KEYS = tuple(k for k, _, _ in COLUMNS) + ("heldout_displacement_psnr_db",)
 

@@ -17,7 +17,11 @@ from typing import Optional
 
 import numpy as np
 
+from nerif.units import declare
+
 log = logging.getLogger(__name__)
+
+declare(cpu_threads="threads", cpu_threads_chosen="[iteration, threads]")
 
 
 def usable_cores() -> int:

@@ -30,7 +30,7 @@ from nerif.data.rig_file import CALIBRATED_VERSION, read_rig, write_rig
 from nerif.data.scene import Scene
 from nerif.geometry import Camera
 from nerif.export import atomic_write, write_npz, write_png
-from nerif.io.units import VOLUMES
+from nerif.units import VOLUMES
 from nerif.sensing.optics import probe_distance_mm
 
 log = logging.getLogger("nerif")

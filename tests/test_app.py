@@ -218,13 +218,15 @@ def test_a_realistic_run_writes_its_images_and_displacement_error(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_default_scene_reaches_the_target_error(tmp_path):
-    """`python -m nerif` as a new user runs it: hash + discrete on Phantom 5 under 25 K temperature RMSE."""
-    r = nerif_here("train.progress=false", f"hydra.run.dir={tmp_path}")
+def test_the_default_scene_is_within_the_target_error_at_a_quarter_of_its_iterations(tmp_path):
+    """`python -m nerif` as a new user runs it (hash + discrete on Phantom 5), a quarter as long: already under 18 K
+    temperature RMSE (13.2 K measured; the whole run's 8.2 K is `benchmarks/same_figures.py`'s default scene, the
+    README's figure). The whole run took 85 s of the suite's 6 min 41 s."""
+    r = nerif_here("train.progress=false", "train.iterations=300", f"hydra.run.dir={tmp_path}")
     assert r.returncode == 0, r.stderr[-2000:]
     m = json.loads((tmp_path / "metrics.json").read_text())
-    assert m["encoder"] == "hash" and m["grad"] == "discrete" and m["iterations"] == 1200
-    assert m["temperature_rmse_K"] < 25.0, m["temperature_rmse_K"]
+    assert m["encoder"] == "hash" and m["grad"] == "discrete" and m["iterations"] == 300
+    assert m["temperature_rmse_K"] < 18.0, m["temperature_rmse_K"]
 
 
 @pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130), (signal.SIGUSR2, 140)])

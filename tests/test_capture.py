@@ -1,6 +1,7 @@
 """Capture folders: written from a synthetic scene, read back through optical flow, trained with a held-out
 view; every bad folder gets one clear error before the flow runs."""
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -380,7 +381,7 @@ def test_an_occluder_mask_in_the_rig_file_is_unknown_and_carves_no_flame(written
     np.testing.assert_array_equal(cap.valid_images[0] | patch, clean.valid_images[0] | patch)
     for v in range(1, cap.n_views):
         np.testing.assert_array_equal(cap.valid_images[v], clean.valid_images[v])
-    occluded = cap.measured["occluded"]  # per view, a share of the ray grid
+    occluded = [f.occluded for f in cap.findings]  # per view, a share of the ray grid
     assert occluded[0] == pytest.approx(patch.mean()) and occluded[1] == 0.0
     hull_clean, hull = (MASKS.build({"name": "3d"}, scene=s).volume for s in (clean, cap))
     flame = written[1].truth_T - written[1].ambient.T0 > 50.0
@@ -459,10 +460,10 @@ def test_several_exposures_per_view_are_averaged(written, tmp_path):
 
     root = _variant(written, tmp_path / "k", noisy, lambda d: expose(d))
     many = capture(root, FLOW, binning=8)
-    assert many.measured["exposures"][0] == [k, 1]
-    assert all(n == pytest.approx(sigma / np.sqrt(k), rel=0.1) for n in many.measured["image_noise"]), \
-        many.measured["image_noise"]
-    assert many.measured["reference_noise"][0] is None
+    assert many.findings[0].exposures == [k, 1]
+    assert all(n == pytest.approx(sigma / np.sqrt(k), rel=0.1) for n in [f.image_noise for f in many.findings]), \
+        [f.image_noise for f in many.findings]
+    assert many.findings[0].reference_noise is None
 
     def single(rig):
         rig["views"]["images"] = [f"distorted_{v:02d}_0.png" for v in range(7)]
@@ -479,7 +480,7 @@ def test_several_exposures_per_view_are_averaged(written, tmp_path):
     def error(scene):
         return float((scene.eps - truth).norm(dim=-1).pow(2).mean().sqrt())
 
-    assert once.measured["image_noise"][0] is None
+    assert once.findings[0].image_noise is None
     assert error(many) < 0.65 * error(once), (error(many), error(once))  # measured 0.50x: 1 / sqrt(4)
 
 
@@ -534,9 +535,9 @@ def test_a_second_measurement_of_the_same_images_is_read_back_and_any_change_mea
         again = capture(root, FLOW, binning=8, cache_dir=cache)
     assert not flows and "read from the cache" in caplog.text
     assert torch.equal(first.eps, again.eps) and np.array_equal(first.valid_images[0], again.valid_images[0])
-    assert not any(first.measured["from_cache"]) and all(again.measured["from_cache"])
-    assert {k: v for k, v in first.measured.items() if k != "from_cache"} == \
-           {k: v for k, v in again.measured.items() if k != "from_cache"}
+    assert not any([f.from_cache for f in first.findings]) and all([f.from_cache for f in again.findings])
+    assert ([replace(f, from_cache=None) for f in first.findings] ==
+            [replace(f, from_cache=None) for f in again.findings])
     capture(root, {**FLOW, "normalise_px": 4.0}, binning=8, cache_dir=cache)  # another setting
     assert len(flows) == first.n_views + 1  # every view, and the held-out one
     image = root / "distorted_00.png"

@@ -77,7 +77,7 @@ def test_clipped_exposures_are_said_with_their_share(written, tmp_path, caplog):
     with caplog.at_level("WARNING"):
         cap = capture(_variant(written, tmp_path, None, gain), FLOW, binning=8)
     said = _quality_warnings(caplog)
-    share = max(cap.measured["clipped"])
+    share = max(f.clipped for f in cap.findings)
     assert share > 0.05 and f"up to {100 * share:.0f} % of the pixels are at full scale" in said, said
     assert "is left out" not in said
 

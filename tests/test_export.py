@@ -27,7 +27,7 @@ def test_the_volumes_say_their_units_in_vti_field_data_and_npz(tmp_path):
     import json
 
     from nerif.export import write_npz
-    from nerif.io.units import VOLUMES
+    from nerif.units import VOLUMES
 
     vol = np.zeros((2, 3, 4))
     write_vti(tmp_path / "v.vti", 0.5, [0, 0, 0], units=VOLUMES, T=vol, sigma=vol)

@@ -29,7 +29,7 @@ def test_a_uniform_shift_comes_out_in_full_sensor_pixels_on_the_ray_grid():
     inner = m1.displacement[4:-4, 4:-4].reshape(-1, 2)
     np.testing.assert_allclose(np.median(inner, 0), [0.6, -0.3], atol=0.05)  # Farneback's bias: 0.036 px
     np.testing.assert_allclose(m2.displacement, 2 * m1.displacement, rtol=1e-6)
-    assert m1.found["valid_fraction"] == 1.0 and m1.found["displacement_max_px"] > 0.5
+    assert m1.found.valid_fraction == 1.0 and m1.found.displacement_max_px > 0.5
 
 
 def test_pixels_without_an_estimate_or_outside_the_region_are_invalid_and_carry_nothing(monkeypatch):
@@ -52,7 +52,7 @@ def test_pixels_without_an_estimate_or_outside_the_region_are_invalid_and_carry_
     hole[10:20, 25:35] = True  # the image's [40, 80) x [100, 140) in blocks of 4
     np.testing.assert_array_equal(m.valid, region & ~hole)
     assert np.isnan(m.displacement[~m.valid]).all() and np.isfinite(m.displacement[m.valid]).all()
-    assert m.found["valid_fraction"] == pytest.approx(m.valid.mean())
+    assert m.found.valid_fraction == pytest.approx(m.valid.mean())
 
 
 def flame_pair(light: float = 0.0, H: int = 200, W: int = 160):
@@ -94,7 +94,7 @@ def test_a_saturated_blob_is_left_out_and_counted():
     distorted[80:100, 60:80] = 1.0  # clipped by the sensor
     m = measure_view(distorted, reference, {"name": "farneback"}, truth.shape[:2])
     assert not m.valid[20:25, 15:20].any() and m.valid[:15].all()
-    assert m.found["saturated"] == pytest.approx((7 * 7) / m.valid.size, rel=0.1)  # the blob's blocks and a 1 px rim
+    assert m.found.saturated == pytest.approx((7 * 7) / m.valid.size, rel=0.1)  # the blob's blocks and a 1 px rim
 
 
 def test_a_view_that_loses_most_of_its_pixels_says_so_with_the_cause(caplog):
@@ -104,7 +104,7 @@ def test_a_view_that_loses_most_of_its_pixels_says_so_with_the_cause(caplog):
     reference[:150], distorted[:150] = 0.05, 0.05  # three quarters of the view without texture
     with caplog.at_level("WARNING"):
         m = measure_view(distorted, reference, {"name": "farneback"}, truth.shape[:2], name="camera 3")
-    assert m.found["occluded"] > 0.6
+    assert m.found.occluded > 0.6
     assert "camera 3: " in caplog.text and "% occluded" in caplog.text and "no usable displacement" in caplog.text
 
 
@@ -138,7 +138,7 @@ def test_the_flow_is_normalised_narrowly_only_where_the_flames_light_is_seen():
     assert width < AUTO_WIDTH_RANGE_PX[1]
     assert estimate({"name": "farneback", "normalise_px": 3.0}, clean, reference)[1] == 3.0
     m = measure_view(flame_pair(0.3)[0], reference, auto, (50, 40))
-    assert m.found["normalise_px"] == pytest.approx(width)
+    assert m.found.normalise_px == pytest.approx(width)
     with pytest.raises(ValueError, match="must be a positive width"):
         estimate({"name": "farneback", "normalise_px": -2}, clean, reference)
 
@@ -171,7 +171,7 @@ def test_a_texture_many_pixels_wide_is_measured_on_images_made_smaller():
             ok = m.valid[4:-4, 4:-4]
             e, t = m.displacement[4:-4, 4:-4][ok], truth[ok]
             error[f] = (float(np.sqrt(((e - t) ** 2).sum(-1).mean())) / k, float((e * t).sum() / (t * t).sum()),
-                        m.found["flow_factor"])
+                        m.found.flow_factor)
         if k == 1:
             assert error["auto"] == error[1] and error["auto"][2] == 1
         else:
@@ -189,5 +189,5 @@ def test_a_set_normalisation_width_is_in_pixels_of_the_images_as_recorded_whatev
     widths = {}
     for f in (1, 2):
         m = measure_view(ref, ref, {"name": "farneback", "normalise_px": 6.0}, (30, 40), flow_factor=f, shake=False)
-        widths[f] = (m.found["normalise_px"], m.found["flow_factor"])
+        widths[f] = (m.found.normalise_px, m.found.flow_factor)
     assert widths == {1: (6.0, 1), 2: (6.0, 2)}

@@ -2,12 +2,13 @@
 import pytest
 import torch
 
+from nerif.app import allocations
 from nerif.configs import compose
-from nerif.memory import check_memory, estimates
+from nerif.memory import check_memory
 
 
 def total(*overrides) -> float:
-    return sum(b for _, _, b in estimates(compose(list(overrides))))
+    return sum(b for _, _, b in allocations(compose(list(overrides))))
 
 
 def test_estimates_grow_as_the_allocations_they_stand_for():
@@ -32,9 +33,9 @@ def test_estimates_grow_as_the_allocations_they_stand_for():
 def test_a_run_that_cannot_fit_is_refused_naming_the_key(monkeypatch, override, key):
     """Issue 28: each of these ran for seconds to minutes and ended in a MemoryError (one at 6.4 GB)."""
     monkeypatch.setattr("nerif.memory.available_bytes", lambda device: 16 * 2.0**30)
-    check_memory(compose([]), torch.device("cpu"))  # the default fits
+    check_memory(allocations(compose([])), torch.device("cpu"))  # the default fits
     with pytest.raises(ValueError, match=f"GiB free on cpu: {key}$"):
-        check_memory(compose([override]), torch.device("cpu"))
+        check_memory(allocations(compose([override])), torch.device("cpu"))
 
 
 
@@ -43,30 +44,26 @@ def test_a_captures_probe_grid_is_read_from_its_rig_file(tmp_path, monkeypatch):
     not read the rig's grid. It reads it now, and the refusal names the key and the file."""
     import yaml
 
-    from nerif.data.capture import probe_voxels
-
     (tmp_path / "rig.yaml").write_text(yaml.safe_dump({
         "format": "nerif-capture", "version": 1, "roi_px": [0, 0, 64, 64],
         "camera": {"focal_mm": 105.0, "pitch_um": 20.0, "sensor_px": [64, 64], "f_number": 32.0,
                    "camera_to_centre_mm": 800.0, "camera_to_background_mm": 1600.0},
         "views": {"angles_deg": [0, 60, 120], "references": "r.png", "images": ["a.png", "b.png", "c.png"]},
         "probe": {"shape": [600, 1000, 600], "voxel_mm": 0.1}, "ambient": {"T0": 296.0, "n0": 1.00027}}))
-    voxels, key = probe_voxels(str(tmp_path))
-    assert voxels == 600 * 1000 * 600 and key == f"probe.shape in {tmp_path / 'rig.yaml'}"
     cfg = compose(["data=capture", f"data.root={tmp_path}"])
-    grid = [b for what, _, b in estimates(cfg, (voxels, key)) if what == "the probe grid's volumes"]
-    assert grid == [pytest.approx(3.6e8 * 96)]
+    grid = [(key, b) for what, key, b in allocations(cfg) if what == "the probe grid's volumes"]
+    assert grid == [(f"probe.shape in {tmp_path / 'rig.yaml'}", pytest.approx(600 * 1000 * 600 * 96))]
     monkeypatch.setattr("nerif.memory.available_bytes", lambda device: 16 * 2.0**30)
     with pytest.raises(ValueError, match=f"lower probe.shape in {tmp_path / 'rig.yaml'}$"):
-        check_memory(cfg, torch.device("cpu"), probe=(voxels, key))
+        check_memory(allocations(cfg), torch.device("cpu"))
 
 
 def test_a_captures_images_count_before_any_work(tmp_path, monkeypatch):
-    """Issue 39: a capture's images take about 24 bytes a pixel over a run (6.0 GiB at 10 views of 25 megapixels).
-    Nine views of 20000 x 20000 px (3.6e9 pixels) are refused before any image is read, naming what sets them."""
+    """Issue 39: a capture's images take about 24 bytes a pixel over a run (6.0 GiB at 10 views of 25 megapixels),
+    and 4 x 3 more where the image term reads the references on a grid twice as fine (the band-limited default,
+    issue 56). Nine views of 20000 x 20000 px (3.6e9 pixels) are refused before any image is read, naming what sets
+    them."""
     import yaml
-
-    from nerif.data.capture import image_pixels
 
     (tmp_path / "rig.yaml").write_text(yaml.safe_dump({
         "format": "nerif-capture", "version": 1, "roi_px": [0, 0, 20000, 20000],
@@ -75,11 +72,11 @@ def test_a_captures_images_count_before_any_work(tmp_path, monkeypatch):
         "views": {"angles_deg": [20 * k for k in range(9)], "references": "r.png",
                   "images": [f"d{k}.png" for k in range(9)]},
         "probe": {"shape": [60, 100, 60], "voxel_mm": 1.0}, "ambient": {"T0": 296.0, "n0": 1.00027}}))
-    pixels, what = image_pixels(str(tmp_path))
-    assert pixels == 9 * 20000 * 20000 and str(tmp_path / "rig.yaml") in what
-    cfg = compose(["data=capture", f"data.root={tmp_path}"])
-    part = [b for name, _, b in estimates(cfg, images=(pixels, what)) if name == "the images"]
-    assert part == [pytest.approx(3.6e9 * 24)]
+    for read, per_pixel in (("bicubic", 24), ("bandlimited", 24 + 4 * 3)):
+        cfg = compose(["data=capture", f"data.root={tmp_path}", f"data_term.interpolation={read}"])
+        part = [(b, what) for name, what, b in allocations(cfg) if name == "the images"]
+        assert part == [(pytest.approx(3.6e9 * per_pixel), pytest.approx(part[0][1]))]
+        assert str(tmp_path / "rig.yaml") in part[0][1]
     monkeypatch.setattr("nerif.memory.available_bytes", lambda device: 16 * 2.0**30)
-    with pytest.raises(ValueError, match="the images alone 80.5 GiB.*lower the views in .*rig.yaml \\(fewer views"):
-        check_memory(cfg, torch.device("cpu"), images=(pixels, what))
+    with pytest.raises(ValueError, match="the images alone 121 GiB.*lower the views in .*rig.yaml \\(fewer views"):
+        check_memory(allocations(cfg), torch.device("cpu"))

@@ -37,8 +37,8 @@ def test_resuming_a_checkpoint_continues_exactly(tmp_path):
         resumed.step()
     for a, b in zip(straight.field.parameters(), resumed.field.parameters()):
         torch.testing.assert_close(a, b)
-    assert int(resumed.average.n_averaged) == 12
-    for a, b in zip(straight.average.parameters(), resumed.average.parameters()):
+    assert int(resumed.optimisation.average.n_averaged) == 12
+    for a, b in zip(straight.optimisation.average.parameters(), resumed.optimisation.average.parameters()):
         torch.testing.assert_close(a, b)
 
 
@@ -54,12 +54,12 @@ def test_a_resume_with_more_iterations_continues_the_schedule_as_if_planned_so(t
     straight = neural_solver("train.iterations=20")
     for _ in range(10):
         straight.step()
-    assert longer.optimizer.param_groups[0]["lr"] == pytest.approx(straight.optimizer.param_groups[0]["lr"], rel=1e-9)
-    assert longer.optimizer.param_groups[0]["lr"] == pytest.approx(5e-3 / 2, rel=1e-3)  # half-way down the cosine
+    assert longer.optimisation.lr == pytest.approx(straight.optimisation.lr, rel=1e-9)
+    assert longer.optimisation.lr == pytest.approx(5e-3 / 2, rel=1e-3)  # half-way down the cosine
     for _ in range(10):
         longer.step()
         straight.step()
-        assert longer.optimizer.param_groups[0]["lr"] == pytest.approx(straight.optimizer.param_groups[0]["lr"], rel=1e-6)
+        assert longer.optimisation.lr == pytest.approx(straight.optimisation.lr, rel=1e-6)
 
 
 def test_a_checkpoint_without_an_average_resumes_and_averages_from_the_next_step(tmp_path):
@@ -73,9 +73,9 @@ def test_a_checkpoint_without_an_average_resumes_and_averages_from_the_next_step
     torch.save(st, tmp_path / "old.pt")
     resumed = neural_solver()
     resumed.load(tmp_path / "old.pt")
-    assert int(resumed.average.n_averaged) == 0 and resumed.estimate is resumed.field
+    assert int(resumed.optimisation.average.n_averaged) == 0 and resumed.estimate is resumed.field
     resumed.step()
-    for a, b in zip(resumed.average.module.parameters(), resumed.field.parameters()):
+    for a, b in zip(resumed.optimisation.average.module.parameters(), resumed.field.parameters()):
         assert torch.equal(a, b)
 
 
@@ -312,11 +312,11 @@ def test_table_decay_shrinks_only_the_hash_entries_no_ray_reaches(decay):
     """AdamW's decoupled decay: an entry without a gradient is multiplied by exactly ``1 - lr decay`` per step
     (Adam's own update is zero there); the MLP is never decayed."""
     tr = neural_solver("encoder=hash", f"train.table_decay={decay}", "train.lr=0.01")
-    groups = {id(p): g["weight_decay"] for g in tr.optimizer.param_groups for p in g["params"]}
+    groups = {id(p): g["weight_decay"] for g in tr.optimisation.optimizer.param_groups for p in g["params"]}
     assert groups[id(tr.field.encoder.table)] == decay
     assert all(groups[id(p)] == 0.0 for p in tr.field.mlp.parameters())
     tr.step()  # the last layer starts at zero: no entry has a gradient yet, only the decay acts
-    before, lr = tr.field.encoder.table.detach().clone(), tr.optimizer.param_groups[0]["lr"]
+    before, lr = tr.field.encoder.table.detach().clone(), tr.optimisation.optimizer.param_groups[0]["lr"]
     tr.step()
     untouched = (tr.field.encoder.table.grad == 0).all(dim=1)
     assert 0 < int(untouched.sum()) < len(before)
@@ -369,9 +369,9 @@ def test_outputs_use_the_moving_average_of_the_trained_weights():
     d = [0.0] + [min(decay, k / (9 + k)) for k in range(2, 7)]
     c = [(1 - d[k]) * float(np.prod(d[k + 1:])) for k in range(6)]
     assert abs(sum(c) - 1) < 1e-12 and d[1] < decay == d[5]  # both regimes
-    assert tr.rate() > 0.5  # so the window is not yet shortened by the rate
+    assert tr.optimisation.rate() > 0.5  # so the window is not yet shortened by the rate
     expected = [sum(ck * w[i] for ck, w in zip(c, iterates)) for i in range(len(iterates[0]))]
-    for a, e in zip(tr.average.module.parameters(), expected):
+    for a, e in zip(tr.optimisation.average.module.parameters(), expected):
         torch.testing.assert_close(a, e)
     with torch.no_grad():
         for p, e in zip(tr.field.parameters(), expected):
@@ -382,13 +382,13 @@ def test_outputs_use_the_moving_average_of_the_trained_weights():
     ended = neural_solver("train.iterations=8")  # the rate anneals to lr_min: the average ends on the last weights
     for _ in range(8):
         ended.step()
-    assert ended.rate() < 1e-3
-    for a, b in zip(ended.average.module.parameters(), ended.field.parameters()):
+    assert ended.optimisation.rate() < 1e-3
+    for a, b in zip(ended.optimisation.average.module.parameters(), ended.field.parameters()):
         assert torch.equal(a, b)
 
     last = neural_solver("train.ema_decay=0")
     last.step()
-    assert last.average is None
+    assert last.optimisation.average is None
     np.testing.assert_array_equal(last.reconstruction(), last.field.on_grid(last.scene.box).double().numpy())
 
 
@@ -411,4 +411,4 @@ def test_an_ensembles_members_are_new_solvers_from_the_trained_state_each_indepe
     assert not np.array_equal(other.reconstruction(), first.reconstruction())
     for k, v in s.estimate.state_dict().items():
         torch.testing.assert_close(v, before[k], rtol=0, atol=0)
-    assert first.optimizer.param_groups[0]["lr"] < 0.3 * 5e-3  # its own cosine, down from 0.3 of the peak
+    assert first.optimisation.optimizer.param_groups[0]["lr"] < 0.3 * 5e-3  # its own cosine, down from 0.3 of the peak

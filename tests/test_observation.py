@@ -21,16 +21,19 @@ def scene():
 def test_a_fields_deflections_become_the_displacements_the_images_hold(scene):
     """The model's displacement of the true deflections, in image pixels, moves the reference onto the distorted
     image: the photometric residual at the true field is far below the one at no field (an independent check of
-    the units: a factor of the binning off would leave most of it)."""
+    the units: a factor of the binning off would leave most of it). The rays picked by ``rows`` get their own rows of
+    the whole view's."""
     for view in observations(scene)[:2]:
         b = view.block
-        u = (view.gain_px @ scene.observed[view.rays].double()[..., None])[..., 0]  # (n, 2) image px
+        u = view.displacement(scene.observed[view.rays])  # (n, 2) image px, the shake in
+        rows = torch.tensor([3, 0, len(u) - 1])
+        assert torch.equal(view.displacement(scene.observed[view.rays][rows], rows), u[rows])
         x = view.pixels().double()  # (n, b^2, 2)
         assert x.shape == (len(u), b * b, 2)
         ref, dist = view.reference.double(), view.distorted.double()
         field = torch.zeros(ref.shape + (2,), dtype=torch.float64)
         xi = x.reshape(-1, 2).long()
-        field[xi[:, 1], xi[:, 0]] = (u[:, None, :] + view.shake_px).expand(-1, b * b, -1).reshape(-1, 2)
+        field[xi[:, 1], xi[:, 0]] = u[:, None, :].expand(-1, b * b, -1).reshape(-1, 2)
         seen, held = warp(ref, field), torch.zeros(ref.shape, dtype=torch.bool)
         held[xi[:, 1], xi[:, 0]] = True
         moving = held & (field.norm(dim=-1) > 0.3 * float(field.norm(dim=-1).max()))

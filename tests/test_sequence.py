@@ -86,10 +86,11 @@ def test_a_warm_frame_starts_from_the_previous_frame_s_field(series):
     warm, cold = solver(cfg, scene, masks), solver(cfg, scene, masks)
     previous = torch.load(out / "frame_0000" / "checkpoint.pt", weights_only=False)
     warm.start_from(out / "frame_0000" / "checkpoint.pt")
-    assert int(previous["average"]["n_averaged"]) > 0 and int(warm.average.n_averaged) == 0  # a fresh average
+    assert int(previous["average"]["n_averaged"]) > 0  # the previous frame kept an average
+    assert int(warm.optimisation.average.n_averaged) == 0  # a fresh one
     for k, v in warm.field.state_dict().items():
         assert torch.equal(v, previous["average"]["module." + k]), k
-    assert warm.iteration == 0 and not warm.optimizer.state  # a fresh optimiser
+    assert warm.iteration == 0 and not warm.optimisation.optimizer.state  # a fresh optimiser
     assert warm.step()["loss"] < 0.3 * cold.step()["loss"]
 
 

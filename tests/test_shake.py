@@ -25,10 +25,10 @@ def test_a_known_shift_is_recovered_beside_a_flame():
     box = np.zeros((60, 50), bool)
     box[10:50, 8:42] = True  # the probe box's image on the ray grid (4 x 4 pixels a ray): the flame is inside it
     m = measure_view(distorted, reference, {"name": "farneback"}, (60, 50), quiet=~box)
-    np.testing.assert_allclose(m.found["shake_px"], shake.numpy(), atol=0.01)
+    np.testing.assert_allclose(m.found.shake_px, shake.numpy(), atol=0.01)
     truth = u.numpy().reshape(60, 4, 50, 4, 2).mean((1, 3))
     inner = (slice(4, -4), slice(4, -4))
     assert np.abs(m.displacement[inner] - truth[inner]).mean() < 0.03  # the flame's own displacements remain
-    bulk, where = rigid_shift(m.displacement + m.found["shake_px"], m.valid)
+    bulk, where = rigid_shift(m.displacement + m.found.shake_px, m.valid)
     assert where == "the bulk of the view"
     np.testing.assert_allclose(bulk, shake.numpy(), atol=0.02)

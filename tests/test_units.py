@@ -1,9 +1,16 @@
-"""The unit of every number nerif writes (:mod:`nerif.io.units`): by name, by the ending of a name, nested keys by
-their own name, and an unknown key said to be unknown (so that a test of a real run catches a new key)."""
-from nerif.io.units import DEFLECTION, metric_units, unit_of
+"""The unit of every number nerif writes (:mod:`nerif.units`): declared by the module that computes it, else by the
+ending of its name; nested keys by their own name, and an unknown key said to be unknown (so that a test of a real
+run catches a new key)."""
+import pytest
+
+import nerif.evaluation  # noqa: F401  (declares the evaluation's figures)
+import nerif.io.outputs  # noqa: F401  (declares the measurement's container)
+import nerif.sensing.findings  # noqa: F401  (declares the measurement's findings)
+import nerif.solvers.base  # noqa: F401  (declares the loop's figures and labels)
+from nerif.units import DEFLECTION, declare, metric_units, unit_of
 
 
-def test_units_by_name_and_by_ending():
+def test_units_by_declaration_and_by_ending():
     assert unit_of("deflection_rmse") == DEFLECTION and unit_of("heldout_deflection_rmse").startswith("rad")
     assert unit_of("temperature_rmse_flame_K") == "K" and unit_of("heldout_displacement_rmse_px_none") == "px"
     assert unit_of("setup_time_s") == "s" and unit_of("T_peak_position_mm") == "mm"
@@ -19,3 +26,10 @@ def test_nested_keys_are_named_by_their_own_name_and_camera_names_are_not_keys()
     assert units["iteration"] == "iterations" and units["temperature_rmse_K"] == "K"
     assert units["mystery"] == "?" and not any(k.startswith("camera") for k in units)
     assert units["measurement"].startswith("(per camera name")
+
+
+def test_a_key_declared_again_must_mean_the_same():
+    declare(a_test_figure_px="px (of the full sensor)")
+    declare(a_test_figure_px="px (of the full sensor)")  # the same again: fine
+    with pytest.raises(ValueError, match="the unit of a_test_figure_px is declared twice"):
+        declare(a_test_figure_px="mm")

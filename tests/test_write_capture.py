@@ -116,7 +116,7 @@ def test_a_dirty_capture_is_written_and_its_burner_read_back_as_occluded(tmp_pat
     dirt = ["data.sensor.burner_radius_mm=4", "data.sensor.luminosity=0.3", "data.sensor.shake_px=0.1"]
     root = main([str(tmp_path / "dirty"), *SMALL, *dirt])
     scene = capture(str(root), {"name": "farneback", "normalise_px": "auto"}, binning=8)
-    found = scene.measured["occluded"] + scene.heldout.measured["occluded"]  # the held-out view is the last
+    found = [f.occluded for f in scene.findings + scene.heldout.findings]  # the held-out view is the last
     truth = DATASETS.build(group(compose(["data.sensing=realistic", *SMALL, *dirt]), "data"))
     true = truth.sensing.occluded_true
     assert np.all(true > 0.02) and np.all(np.abs(np.asarray(found) - true) < 0.5 * true + 0.01), (found, true)

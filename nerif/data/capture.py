@@ -25,11 +25,13 @@ from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region
 from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.rig_file import RigFile, read_rig
 from nerif.data.diagnostics import screened
-from nerif.data.scene import (DATASETS, Scene, ViewImages, found_per_view, heldout_views,
+from nerif.data.scene import (DATASETS, Scene, ViewImages, heldout_views,
                               scene_from_displacements)
 from nerif.geometry import Camera, outside_the_box, rays_in_box
+from nerif.memory import FLOAT, probe_grid
 from nerif.physics import Ambient
 from nerif.sensing.flow import FLOW, check_flow
+from nerif.sensing.interpolation import INTERPOLATIONS
 from nerif.sensing.measurement import MEASUREMENT, measure_cached
 
 log = logging.getLogger(__name__)
@@ -125,19 +127,22 @@ def capture_frames(root: str, frames=None, **_) -> Optional[list[Frame]]:
     return [Frame(k, rig.frames[k].time_s) for k in picked]
 
 
-def probe_voxels(root: str) -> tuple[float, str]:
-    """The voxels of a capture folder's probe grid and the key that sets them, for the memory estimate before any
-    work (:func:`nerif.memory.check_memory`); the rig file checked as :func:`capture` reads it."""
-    rig = read_rig(dataset_folder(root))
-    return float(np.prod(rig.box.shape)), f"probe.shape in {rig.path}"
+PER_PIXEL = 24  # bytes an image pixel of a capture's view takes over a run (both images, as read, measured, band-passed
+               # and as B-spline coefficients): 6.0 GiB at 10 views of 25 megapixels, 1.2 GiB of it the run's own
 
 
-def image_pixels(root: str) -> tuple[float, str]:
-    """The pixels of one frame's images of a capture folder (every view's, at the sensor's size) and what sets them,
-    for the memory estimate before any work (:func:`nerif.memory.check_memory`)."""
-    rig = read_rig(dataset_folder(root))
+def allocations(cfg) -> list[tuple[str, str, float]]:
+    """What a capture allocates (:mod:`nerif.memory`), read from its rig file (checked as :func:`capture` reads it):
+    one frame's images of every view at the sensor's size (:data:`PER_PIXEL` a pixel, and ``factor^2 - 1`` floats
+    more where the image term reads each reference on a grid ``factor`` times finer,
+    ``data_term.interpolation``; counted whatever the solver, an upper bound), and the probe grid."""
+    rig = read_rig(dataset_folder(cfg["data"]["root"]))
     w, h = rig.sensor_px
-    return float(rig.n_views * w * h), f"the views in {rig.path} (fewer views, or images cropped to the flame)"
+    read = (cfg.get("data_term") or {}).get("interpolation")  # an unknown one: the data term refuses it
+    factor = INTERPOLATIONS.get(read).factor if read in INTERPOLATIONS else 1
+    return [("the images", f"the views in {rig.path} (fewer views, or images cropped to the flame)",
+             float(rig.n_views * w * h) * (PER_PIXEL + FLOAT * (factor**2 - 1))),
+            probe_grid(float(np.prod(rig.box.shape)), f"probe.shape in {rig.path}")]
 
 
 def _record_exposures(measured, cached, cache_dir, distorted, references, noise, ref_noise) -> None:
@@ -146,17 +151,17 @@ def _record_exposures(measured, cached, cache_dir, distorted, references, noise,
     if any(cached):
         log.info("measurements of %d of %d views read from the cache in %s (the same images, masks and settings "
                  "measured before; data.cache_dir=null measures again)", sum(cached), len(cached), cache_dir)
-    for m, c in zip(measured, cached):
-        m.found["from_cache"] = bool(c)
-    for m, d, r, nd, nr in zip(measured, distorted, references, noise, ref_noise):  # K exposures averaged per image
-        m.found.update(exposures=[len(d), len(r)], image_noise=nd, reference_noise=nr)
+    for m, c, d, r, nd, nr in zip(measured, cached, distorted, references, noise, ref_noise):
+        # K exposures averaged per image
+        m.found.from_cache, m.found.exposures = bool(c), [len(d), len(r)]
+        m.found.image_noise, m.found.reference_noise = nd, nr
     if any(len(f) > 1 for f in distorted + references):
         log.info("exposures averaged per view: %s distorted, %s reference; noise of the means %s",
                  "/".join(str(len(f)) for f in distorted), "/".join(str(len(f)) for f in references),
                  ", ".join("-" if n is None else f"{100 * n:.2f} %" for n in noise))
 
 
-@DATASETS.register("capture")
+@DATASETS.register("capture", allocations=allocations)
 def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto", heldout: Optional[list] = None,
             frames=None, frame: Optional[int] = None, truth: Optional[str] = None, cache_dir=None,
             device: str = "cpu") -> Scene:
@@ -214,6 +219,6 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
                                      [m.valid for m in measured], device=device, rays=rays, sigma_prior=prior,
                                      sigma_prior_from=f"temperature_range_K {list(rig.temperature_range_K or ())} in "
                                                       f"{rig.path}",
-                                     images=views, truth_T=truth_T, found=found_per_view(measured), cache_dir=cache_dir,
+                                     images=views, truth_T=truth_T, found=[m.found for m in measured], cache_dir=cache_dir,
                                      left_out=causes if all(c is not None for c in causes) else None)
     return screened(scene, held)

@@ -19,6 +19,7 @@ import numpy as np
 
 from nerif.data.scene import Scene
 from nerif.geometry import Camera
+from nerif.sensing.findings import Findings
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +57,7 @@ def beyond_the_box(scene: Scene) -> str:
     the flame, the flame is larger than the box, or the rig's geometry (focal length, pitch, distances, binning in
     the camera) draws the box smaller or elsewhere than it is in the images; a field in the box cannot explain
     those rays either way."""
-    outside = (scene.measured or {}).get("outside_px") or [None] * scene.n_views
+    outside = [f.outside_px for f in scene.findings] if scene.findings else [None] * scene.n_views
     seen = [(v, o, _reach(scene, v)) for v, o in enumerate(outside) if o is not None]
     hit = [(v, o, r) for v, o, r in seen if r > 0 and o > OUTSIDE * r]
     if not hit:
@@ -74,8 +75,8 @@ def clipping(scene: Scene) -> str:
     (the measurement's ``clipped``), else "". Those pixels are kept where the texture survives around them (the
     centres of bright dots), but the flow reads their displacement less well: with a 2x gain clipped at full scale,
     the error of a run rose 3.6-fold (issue 38's probe)."""
-    clipped = (scene.measured or {}).get("clipped") or [0.0] * scene.n_views
-    hit = [(scene.cameras[v].name, c) for v, c in enumerate(clipped) if c > CLIPPED]
+    clipped = [f.clipped for f in scene.findings] if scene.findings else [None] * scene.n_views
+    hit = [(scene.cameras[v].name, c) for v, c in enumerate(clipped) if c is not None and c > CLIPPED]
     if not hit:
         return ""
     worst = max(c for _, c in hit)
@@ -89,25 +90,25 @@ def bad_views(scene: Scene) -> dict[int, str]:
     whose displacements are nearly absent or wild against the other views' (below :data:`ABSENT` or above
     :data:`WILD` times their median RMS), point the other way from theirs where most agree on a hot flame, or are
     outweighed by a rigid shift between the exposures (the camera knocked)."""
-    found = scene.measured or {}
-    per_view = [{k: vals[v] for k, vals in found.items()} for v in range(scene.n_views)]
+    per_view = scene.findings or [Findings() for _ in range(scene.n_views)]
     why: dict[int, str] = {}
     counts = scene.view_counts().tolist()
     for v, f in enumerate(per_view):
         if counts[v] == 0:
-            left = ", ".join(f"{100 * f[k]:.0f} % {k}" for k in ("saturated", "occluded", "unmeasured", "rejected")
-                             if f.get(k, 0) > 0)
+            left = ", ".join(f"{100 * share:.0f} % {k}" for k, share in (
+                ("saturated", f.saturated), ("occluded", f.occluded), ("unmeasured", f.unmeasured),
+                ("rejected", f.rejected)) if share)
             why[v] = f"its measurement left no usable pixel where it sees the probe box ({left or 'nothing measured'})"
-        elif f.get("difference_rms", 1.0) < SAME_IMAGE:
+        elif f.difference_rms is not None and f.difference_rms < SAME_IMAGE:
             why[v] = ("its distorted image equals its reference (the same file, or both taken without the flame?): "
                       "it holds no displacement")
-        elif f.get("texture_ratio", 1.0) < TEXTURE_LOST:
-            why[v] = (f"its distorted image has lost the background's texture ({100 * f['texture_ratio']:.0f} % of its "
+        elif f.texture_ratio is not None and f.texture_ratio < TEXTURE_LOST:
+            why[v] = (f"its distorted image has lost the background's texture ({100 * f.texture_ratio:.0f} % of its "
                       "reference's contrast: black, flat, overexposed or out of focus?)")
     reach = {v: _reach(scene, v) for v in range(scene.n_views)}
     rest = [v for v in range(scene.n_views) if v not in why]
     for v in rest:
-        shake = float(np.hypot(*per_view[v].get("shake_px", (0.0, 0.0))))
+        shake = float(np.hypot(*(per_view[v].shake_px or (0.0, 0.0))))
         typical = float(np.median([reach[k] for k in rest if k != v])) if len(rest) > 1 else reach[v]
         if shake > KNOCKED_PX and shake > 3.0 * typical:
             why[v] = (f"the camera moved by {shake:.2f} px between its exposures, more than the flame's displacements "

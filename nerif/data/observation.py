@@ -41,6 +41,13 @@ class ViewObservation:
     reference: torch.Tensor
     distorted: torch.Tensor
 
+    def displacement(self, eps: torch.Tensor, rows: torch.Tensor | None = None) -> torch.Tensor:
+        """(R, 3) deflections of sigma of the view's rays ``rows`` (indices among its own rays; default: all) ->
+        (R, 2) the displacements [image px] its distorted image holds against its reference there: the field's,
+        and the camera's shake."""
+        gain = self.gain_px if rows is None else self.gain_px[rows]
+        return (gain @ eps.to(gain.dtype)[..., None])[..., 0] + self.shake_px
+
     def image_px(self, u_sensor_px: torch.Tensor) -> torch.Tensor:
         """(..., 2) displacements [px of the full sensor] -> [image px]."""
         return u_sensor_px / self.binning

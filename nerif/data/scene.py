@@ -16,6 +16,7 @@ from nerif.geometry import Camera, ProbeBox, rays_in_box, view_index
 from nerif.physics import Ambient
 from nerif.registry import Registry
 from nerif.renderers.deflection import perpendicular
+from nerif.sensing.findings import Findings
 from nerif.sensing.displacement import displacement_matrix, displacement_to_deflection
 from nerif.sensing.record import SensingRecord
 
@@ -54,8 +55,8 @@ class View:
             unknown: it has no ray, carves no visual hull and counts as no ambient.
         mask: (height, width) bool 2-D mask that came with the data (the mask builders then use it instead of
             thresholding the deflections), else None.
-        found: what the measurement stage found in this view (:class:`nerif.sensing.measurement.ViewMeasurement`
-            ``found``: name -> value), empty where the data were not measured from images.
+        found: what the measurement stage found in this view (:class:`nerif.sensing.findings.Findings`), None
+            where the data were not measured from images.
         measured_px: (height, width, 2) the stage's displacements on the whole ray grid [px of the full sensor],
             NaN where left out, and ``left_out`` (height, width) uint8 why each pixel was (an index into
             :data:`nerif.sensing.measurement.CAUSES`, 0: kept): for the view's picture; None where not measured.
@@ -65,7 +66,7 @@ class View:
     images: Optional[ViewImages] = None
     valid: Optional[np.ndarray] = None
     mask: Optional[np.ndarray] = None
-    found: dict = field(default_factory=dict)
+    found: Optional[Findings] = None
     measured_px: Optional[np.ndarray] = None
     left_out: Optional[np.ndarray] = None
 
@@ -74,21 +75,21 @@ class View:
 
 
 def views_of(cameras: list[Camera], images: Optional[list] = None, valid: Optional[list] = None,
-             masks: Optional[list] = None, found: Optional[dict] = None, measured_px: Optional[list] = None,
+             masks: Optional[list] = None, found: Optional[list] = None, measured_px: Optional[list] = None,
              left_out: Optional[list] = None) -> list[View]:
-    """Per-view records from per-view lists (each None, or one entry per camera; ``found``: name -> list of one
-    value per view)."""
+    """Per-view records from per-view lists (each None, or one entry per camera; ``found``: each view's
+    :class:`Findings`)."""
     n = len(cameras)
     for what, per_view in (("images", images), ("valid", valid), ("masks", masks), ("measured_px", measured_px),
-                           ("left_out", left_out), *(found or {}).items()):
+                           ("left_out", left_out), ("found", found)):
         if per_view is not None and len(per_view) != n:
             raise ValueError(f"{what}: {len(per_view)} entries for {n} views")
 
     def at(per_view, v):
         return per_view[v] if per_view is not None else None
 
-    return [View(cam, at(images, v), at(valid, v), at(masks, v), {k: x[v] for k, x in (found or {}).items()},
-                 at(measured_px, v), at(left_out, v)) for v, cam in enumerate(cameras)]
+    return [View(cam, at(images, v), at(valid, v), at(masks, v), at(found, v), at(measured_px, v), at(left_out, v))
+            for v, cam in enumerate(cameras)]
 
 
 @dataclass(kw_only=True)
@@ -168,16 +169,19 @@ class Scene:
         return self._every("mask")
 
     @property
-    def measured(self) -> Optional[dict]:
-        """What the measurement stage found, as name -> list of one value per view; None where nothing was."""
-        return found_per_view(self.views) if self.views and self.views[0].found else None
+    def findings(self) -> Optional[list[Findings]]:
+        """What the measurement stage found in each view (:class:`Findings`); None where the data were not
+        measured from images."""
+        return [view.found for view in self.views] if self.views and self.views[0].found is not None else None
 
     def with_found(self, **per_view) -> "Scene":
-        """The same scene with these measurement findings (name -> list of one value per view) set in its views."""
+        """The same scene with these measurement findings (a :class:`Findings` field -> list of one value per view)
+        set in its views' records (made where they had none)."""
         for k, x in per_view.items():
             if len(x) != self.n_views:
                 raise ValueError(f"{k}: {len(x)} values for {self.n_views} views")
-        return replace(self, views=[replace(view, found={**view.found, **{k: x[v] for k, x in per_view.items()}})
+        return replace(self, views=[replace(view, found=replace(view.found or Findings(),
+                                                                **{k: x[v] for k, x in per_view.items()}))
                                     for v, view in enumerate(self.views)])
 
     @property
@@ -240,7 +244,7 @@ class Scene:
         """(V, 2) float64: each view's rigid image shift between the exposures the measurement stage found and took
         off its displacements [px of the full sensor] (zeros where none was measured). The images still hold it:
         a term that compares them adds it back."""
-        shakes = (self.measured or {}).get("shake_px")
+        shakes = [f.shake_px for f in self.findings] if self.findings else None
         return torch.as_tensor(shakes if shakes is not None else np.zeros((self.n_views, 2)), dtype=torch.float64,
                                device=self.dirs.device).reshape(self.n_views, 2)
 
@@ -353,7 +357,7 @@ def scene_from_images(box: ProbeBox, ambient: Ambient, cameras: list[Camera], ep
 
 def scene_from_displacements(box: ProbeBox, ambient: Ambient, cameras: list[Camera], displacements: list[np.ndarray],
                              valid: list[np.ndarray], device="cpu", rays: Optional[tuple] = None,
-                             images: Optional[list[ViewImages]] = None, found: Optional[dict] = None,
+                             images: Optional[list[ViewImages]] = None, found: Optional[list] = None,
                              left_out: Optional[list[np.ndarray]] = None, **fields) -> Scene:
     """A scene of measured image displacements (:class:`nerif.sensing.measurement.ViewMeasurement`): per view, the
     pixels that are ``valid`` and whose ray crosses the box, each ray's displacement kept (``Scene.displacements``)
@@ -363,7 +367,7 @@ def scene_from_displacements(box: ProbeBox, ambient: Ambient, cameras: list[Came
         displacements: per view, (height, width, 2) displacements [px of the full sensor] on the ray grid.
         valid: per view, (height, width) bool: the pixels with a usable measurement.
         images: per view, the background images the displacements were measured from (None: not kept).
-        found: what the measurement stage found, name -> list of one value per view (:func:`found_per_view`).
+        found: per view, what the measurement stage found (:class:`Findings`), or None.
         left_out: per view, (height, width) uint8 why each pixel was left out (:class:`View`), or None.
         rays, fields: as for :func:`scene_from_images`.
     """
@@ -391,12 +395,6 @@ def heldout_views(heldout, n_views: int, what: str = "the held-out views") -> li
     if len(held) >= n_views:
         raise ValueError(f"all {n_views} views are held out: at least one must be trained on")
     return held
-
-
-def found_per_view(measurements: list) -> dict:
-    """What each view's measurement found (their ``found``: measurements or :class:`View` records), as name -> list
-    of one value per view."""
-    return {k: [m.found[k] for m in measurements] for k in measurements[0].found} if measurements else {}
 
 
 def kept_pixels(cameras: list[Camera], pixel: torch.Tensor, view_start: torch.Tensor, keep: torch.Tensor) -> list:

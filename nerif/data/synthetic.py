@@ -4,8 +4,10 @@ in time."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import torch
 
 from nerif.cache import cached_arrays, content_digest
@@ -15,7 +17,9 @@ from nerif.data.phantoms import PHANTOMS
 from nerif.data.scene import (DATASETS, Scene, ViewImages, keep_rays, kept_pixels, scene_from_displacements,
                               views_of)
 from nerif.geometry import RIGS, rays_in_box
+from nerif.memory import probe_grid
 from nerif.physics import Ambient
+from nerif.sensing.findings import Findings
 from nerif.sensing.models import SENSING
 from nerif.sensing.record import SensingRecord
 
@@ -57,7 +61,31 @@ def _rendered_scene(ph, ambient: Ambient, cameras: list, rays: tuple, eps: torch
                  view_start=view_start, truth_T=ph.T, sensing=record, perpendicular_only=sensing != "ideal")
 
 
-@DATASETS.register("synthetic", hints={"binning": "rig.binning"})
+def _phantom_voxels(phantom) -> Optional[float]:
+    """Voxels of the phantom's grid: its ``shape``, or the header of a ``.npy`` file (other files: unknown)."""
+    if "shape" in phantom and phantom["shape"] is not None:
+        return float(np.prod([float(n) for n in phantom["shape"]]))
+    path = phantom.get("path")
+    if path and str(path).endswith(".npy") and Path(str(path)).expanduser().is_file():
+        try:
+            return float(np.prod(np.load(Path(str(path)).expanduser(), mmap_mode="r").shape))
+        except (OSError, ValueError):
+            return None
+    return None
+
+
+def allocations(cfg) -> list[tuple[str, str, float]]:
+    """What a synthetic scene allocates (:mod:`nerif.memory`): the phantom and its deflection field on the
+    supersampled rendering grid (float64), and the probe grid; nothing known where the phantom's grid is not."""
+    voxels = _phantom_voxels(cfg["phantom"])
+    if voxels is None:
+        return []
+    ss = float(cfg["data"]["render_supersample"])
+    return [("the phantom on the rendering grid", "data.render_supersample", voxels * ss**3 * 8 * 4),
+            probe_grid(voxels, "phantom.shape")]
+
+
+@DATASETS.register("synthetic", hints={"binning": "rig.binning"}, allocations=allocations)
 def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", sensor: Optional[dict] = None,
               render_supersample: int = 4, render_step_mm: Optional[float] = None, cache_dir: Optional[str] = None,
               deflection_noise: float = 0.0, noise_seed: int = 0, frames=None, frame_rate_hz: float = 250.0,
@@ -128,7 +156,8 @@ def measured_scene(ph, ambient: Ambient, cameras: list, rays: tuple, record: Sen
     images = [ViewImages(torch.as_tensor(record.reference[v] / 255.0, dtype=torch.float32, device=device),
                          torch.as_tensor(record.distorted[v] / 255.0, dtype=torch.float32, device=device),
                          cam.full_sensor.binned(binning)) for v, cam in enumerate(cameras)]
-    found = {k: v.tolist() for k, v in record.found.items()}
+    per_view = {k: v.tolist() for k, v in record.found.items()}
+    found = [Findings.read({k: x[v] for k, x in per_view.items()}) for v in range(len(cameras))]
     return scene_from_displacements(ph.box, ambient, cameras, list(record.displacement_px), list(record.valid),
                                     device=device, rays=rays, images=images, found=found, truth_T=ph.T, sensing=record,
                                     left_out=list(record.left_out))

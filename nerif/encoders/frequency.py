@@ -23,6 +23,11 @@ class Frequency(nn.Module):
         self.register_buffer("freqs", (2.0 ** torch.arange(n_octaves)) * math.pi, persistent=False)
         self.out_dim = 3 * (2 * n_octaves + int(include_input))
 
+    @staticmethod
+    def features(encoder) -> int:
+        """Features a point (``encoder``: this group's config)."""
+        return 3 * (2 * int(encoder["n_octaves"]) + int(bool(encoder["include_input"])))
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         xf = (x[..., None, :] * self.freqs[:, None]).flatten(-2)  # (N, 3 n_octaves)
         parts = [x] if self.include_input else []

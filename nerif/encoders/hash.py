@@ -73,6 +73,18 @@ class HashGrid(nn.Module):
     2^15 entries, trilinear); the paper's are 16 levels 16 -> 512 and 2^19 entries (``+experiment=paper_phantom5``).
     """
 
+    @staticmethod
+    def features(encoder) -> int:
+        """Features a point (``encoder``: this group's config)."""
+        return int(encoder["n_levels"]) * int(encoder["n_features"])
+
+    @staticmethod
+    def allocations(cfg) -> list[tuple[str, str, float]]:
+        """The tables, with their gradients, Adam's moments and the average (:mod:`nerif.memory`)."""
+        e = cfg["encoder"]
+        entries = float(e["n_levels"]) * 2.0 ** float(e["log2_table_size"]) * float(e["n_features"])
+        return [("the hash tables", "field.log2_table_size", entries * 5 * 4)]
+
     def __init__(
         self,
         n_levels: int = 8,

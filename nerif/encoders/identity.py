@@ -11,5 +11,10 @@ class Identity(nn.Module):
 
     out_dim = 3
 
+    @staticmethod
+    def features(encoder) -> int:
+        """Features a point (``encoder``: this group's config)."""
+        return 3
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return x

@@ -18,12 +18,19 @@ import torch
 import nerif.io.plots as plots
 from nerif.cache import cached_arrays, content_digest, source_digest
 from nerif.export import atomic_write, write_npz, write_png, write_vti
-from nerif.io.units import VOLUMES
 from nerif.metrics import temperature_figures, uncertainty_scores
 from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
                              profiles_figure, save_figure, sensing_figure, slice_figure)
+from nerif.units import SHARE, SIGMA, VOLUMES, declare
 
 log = logging.getLogger(__name__)
+
+declare(uncertainty_coverage_1sigma=SHARE, uncertainty_coverage_2sigma=SHARE, uncertainty_coverage_2sigma_core=SHARE,
+        uncertainty_spearman="1 (rank correlation)",
+        uncertainty_ause="1 (area under the sparsification error, of sigma)", sigma_std_median_flame=SIGMA,
+        ray_binning="px (sensor pixels across a ray)", shake_px_max="px (of the full sensor)",
+        text=("temperature_note", "deflection_unit", "history_note"),
+        containers={"measurement": "(per camera name: its findings, each unit by its name here)"})
 # the files every run writes (held-out figures, masks and sensing pictures beside them where there are any)
 RESULTS = ("reconstruction.npz", "reconstruction.vti", "slices.png", "profiles.png", "curves.png", "metrics.json")
 
@@ -136,22 +143,10 @@ def write_heldout(solver, out_dir: Path) -> dict:
     return ev.heldout_errors(solver.predict, every=True, pred=pred)
 
 
-def failed_fit(m: dict) -> str:
-    """One sentence where the held-out views say the fit failed: its prediction explains their images, or their
-    displacements, worse than no flame at all would (``heldout_*`` against ``heldout_*_none``); else ""."""
-    for key, what in (("heldout_photometric_rmse", "images"), ("heldout_displacement_rmse_px", "displacements")):
-        fit, none = m.get(key), m.get(f"{key}_none")
-        if fit is not None and none is not None and fit > none:
-            return (f"the fit failed: it explains the held-out view's {what} worse than no flame at all ({key} "
-                    f"{fit:.4g} against {none:.4g}); its temperatures mean nothing. Look at the measurement lines "
-                    "of the log (shakes, pixels left out) and at heldout/*.png")
-    return ""
-
-
 def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float, show=None) -> dict:
     """Volumes (.npz, .vti), slice, profile and curve PNGs, held-out figures, and the metrics of the final state
-    (the flame's volume: where T is above ``flame_above_K`` [K]); ``show(name, figure)``, where given, is shown the
-    slices and profiles before they are saved (TensorBoard)."""
+    (the flame's volume: where T is above ``flame_above_K`` [K]); ``show(name, png)``, where given, is shown the
+    slices and profiles as their files hold them (TensorBoard)."""
     amb, box = scene.ambient, scene.box
     vols = dict(solver.volumes())
     sigma = vols["sigma"]
@@ -168,10 +163,10 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float,
     label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
     title = f"{label}, {solver.iteration} iterations"
     for name, figure in (("slices", slice_figure), ("profiles", profiles_figure)):
-        fig = volume_slices(sigma, scene, title, vols.get("sigma_std"), figure)
+        png = png_bytes(volume_slices(sigma, scene, title, vols.get("sigma_std"), figure))  # drawn once
+        atomic_write(out_dir / f"{name}.png", lambda tmp: Path(tmp).write_bytes(png))
         if show is not None:
-            show(name, fig)
-        save_figure(fig, out_dir / f"{name}.png")
+            show(name, png)
     save_figure(curves_figure(solver.history, losses, solver.report.get("images_from_iteration"),
                               "rad" if amb.temperature_known else "sigma"), out_dir / "curves.png")
     final = dict(solver.history[-1]) if solver.history else solver.evaluate()
@@ -181,7 +176,7 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float,
         final.update(write_heldout(solver, out_dir))  # every held-out ray, not the evaluation subset
         final["history_note"] = ("history follows the errors on a fixed subset of rays (metrics.eval_rays_per_view "
                                  "per view); the final heldout_* figures use every held-out ray")
-        failed = failed_fit(final)
+        failed = solver.evaluation.failed(final)
         if failed:
             log.warning("%s", failed)
     if not amb.temperature_known:
@@ -213,9 +208,9 @@ def measurement_report(scene, refined: Optional[torch.Tensor] = None) -> dict:
     the full sensor] (``shake_refined_px`` beside the measured ``shake_px``), or None."""
     per_view = {}
     for s in (scene, scene.heldout):
-        if s is not None and s.measured:
-            for v, cam in enumerate(s.cameras):
-                per_view[cam.name] = {k: vals[v] for k, vals in s.measured.items()}
+        if s is not None and s.findings:
+            for cam, found in zip(s.cameras, s.findings):
+                per_view[cam.name] = found.report()
     if not per_view:
         return {}
     if refined is not None:

@@ -93,7 +93,7 @@ def profiles_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] =
         columns.append(((px, pz), f"vertical through the {'true ' if T_true is not None else ''}peak "
                                   f"(x = {ax_x[px]:.1f}, z = {ax_z[pz]:.1f} mm)"))
     fig, axes = plt.subplots(1, len(columns) + len(heights), figsize=(4.2 * (len(columns) + len(heights)), 4.2),
-                             squeeze=False)
+                             squeeze=False, layout="constrained")
     lines = [(ax_y, T[i, :, k], None if std is None else std[i, :, k], None if T_true is None else T_true[i, :, k],
               name, "y [mm]") for (i, k), name in columns]
     lines += [(ax_x, T[:, iy, iz], None if std is None else std[:, iy, iz],
@@ -117,7 +117,6 @@ def profiles_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] =
     axes[0, 0].legend(fontsize=8)
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
     return fig
 
 
@@ -177,7 +176,7 @@ def curves_figure(history: list[dict], losses: list[tuple[int, dict]], images_fr
     evaluation errors against wall time (the temperature's RMSE where a truth is known, else the deflections', in
     ``deflection_unit``). The data term is normalised by what it compares (the deflections' or the images' mean
     square), so its level changes where the fit switches from one to the other."""
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.4))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.4), layout="constrained")  # laid out as it is drawn, once
     if losses:
         it = np.array([i for i, _ in losses])
         names = [k for k in losses[0][1] if k.startswith("loss")]
@@ -213,14 +212,14 @@ def curves_figure(history: list[dict], losses: list[tuple[int, dict]], images_fr
     b.set_xlabel("training wall time [s]")
     b.set_ylabel(EVALUATED[key].format(unit=deflection_unit))
     b.set_title("error during training (fixed evaluation rays)", fontsize=9)
-    fig.tight_layout()
     return fig
 
 
 def image_panels(panels: list, title: str, width_in: float = 3.2, height_in: float = 4.2):
     """A row of images without axes, each with its title and colour bar: ``panels`` = (title, image, imshow
     keywords). Returns the figure."""
-    fig, axes = plt.subplots(1, len(panels), figsize=(width_in * len(panels), height_in), squeeze=False)
+    fig, axes = plt.subplots(1, len(panels), figsize=(width_in * len(panels), height_in), squeeze=False,
+                             layout="constrained")
     for ax, (name, img, kw) in zip(axes[0], panels):
         im = ax.imshow(img, **kw)
         ax.set_title(name, fontsize=9)
@@ -228,7 +227,6 @@ def image_panels(panels: list, title: str, width_in: float = 3.2, height_in: flo
         ax.set_yticks([])
         fig.colorbar(im, ax=ax, fraction=0.046)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
     return fig
 
 
@@ -253,7 +251,7 @@ def heldout_figure(observed: np.ndarray, predicted: np.ndarray, unit: str, title
     panels = [(f"observed |{what}| [{unit}]", mag_o, dict(cmap="viridis", vmin=0, vmax=vmax or 1.0)),
               (f"predicted |{what}| [{unit}]", mag_p, dict(cmap="viridis", vmin=0, vmax=vmax or 1.0)),
               (f"|predicted - observed| [{unit}]", diff, dict(cmap="magma", vmin=0, vmax=dmax or 1.0))]
-    fig, axes = plt.subplots(1, 3, figsize=(11.5, 3.2 * h / max(w, 1) + 1.6), squeeze=False)
+    fig, axes = plt.subplots(1, 3, figsize=(11.5, 3.2 * h / max(w, 1) + 1.6), squeeze=False, layout="constrained")
     for ax, (name, img, kw) in zip(axes[0], panels):
         im = ax.imshow(img, extent=(0, w * block_px, h * block_px, 0), interpolation="nearest", **kw)
         ax.set_facecolor("#b0b0b0")
@@ -262,7 +260,6 @@ def heldout_figure(observed: np.ndarray, predicted: np.ndarray, unit: str, title
         ax.set_ylabel("row [px]")
         fig.colorbar(im, ax=ax, fraction=0.046, label=f"[{unit}]")
     fig.suptitle(f"{title}\n{HOLES}" if title else HOLES, fontsize=9)
-    fig.tight_layout()
     return fig
 
 
@@ -335,7 +332,7 @@ def measured_figure(reference: np.ndarray, displacement: np.ndarray, left_out: n
     H, W = reference.shape
     h, w = left_out.shape
     extent = (-0.5, W - 0.5, H - 0.5, -0.5)  # image pixels, row 0 at the top
-    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.4 * H / max(W, 1) + 1.0), squeeze=False)
+    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.4 * H / max(W, 1) + 1.0), squeeze=False, layout="constrained")
     ax = axes[0, 0]
     ax.imshow(reference, cmap="gray", extent=extent, vmin=0, vmax=float(np.max(reference)) or 1.0)
     overlay = np.ma.masked_equal(left_out, 0)
@@ -361,5 +358,4 @@ def measured_figure(reference: np.ndarray, displacement: np.ndarray, left_out: n
         ax.set_ylabel("row [px]")
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
     return fig

@@ -7,6 +7,8 @@ import torch
 
 from nerif.renderers.gradients import GRADIENTS
 from nerif.renderers.samplers import Samples, UniformSampler
+from nerif.units import declare
+declare(field_evaluations_per_sample="evaluations")
 
 
 def integrate(values: torch.Tensor, samples: Samples) -> torch.Tensor:
@@ -65,6 +67,14 @@ class DeflectionRenderer:
         self.weights, self.stencil, self.step_mm = dict(weights), stencil, float(step_mm)
         self.perpendicular_only = bool(perpendicular_only)
         self.sampler = UniformSampler(samples_per_ray, jitter=False)
+
+    @staticmethod
+    def check(weights: Mapping[str, float], stencil: str) -> None:
+        """The ``grad`` group's ``weights`` and ``stencil``, or one sentence naming what cannot be used."""
+        if stencil not in ("axes", "across"):
+            raise ValueError(f"grad.stencil must be 'axes' or 'across', got '{stencil}'")
+        if not any(w > 0 for w in weights.values()):
+            raise ValueError("every gradient-loss weight is zero: nothing to train on (set grad.weights)")
 
     @property
     def trained(self) -> dict:

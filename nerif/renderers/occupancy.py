@@ -45,6 +45,11 @@ class OccupancySampler(UniformSampler):
         subset_fraction: share of cells visited by a later update.
     """
 
+    @staticmethod
+    def allocations(cfg) -> list[tuple[str, str, float]]:
+        """The grid's densities, their update and its bits (:mod:`nerif.memory`)."""
+        return [("the occupancy grid", "field.occupancy_resolution", float(cfg["sampler"]["resolution"]) ** 3 * 3 * 4)]
+
     def __init__(self, samples_per_ray: int = 32, jitter: bool = True, resolution: int = 64, decay: float = 0.95,
                  threshold: float = 1e-5, update_every: int = 16, warmup: int = 64, full_updates: int = 4,
                  subset_fraction: float = 0.125):

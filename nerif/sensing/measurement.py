@@ -19,6 +19,7 @@ import numpy as np
 
 from nerif.cache import cached_arrays, content_digest
 from nerif.registry import Registry
+from nerif.sensing.findings import Findings
 from nerif.sensing.flame_light import without_flame_light
 from nerif.sensing.flow import estimate
 from nerif.sensing.imaging import enlarged, resample, shrunk
@@ -43,14 +44,8 @@ class ViewMeasurement:
             each a block mean of the flow's, the camera's rigid shift taken off; NaN where ``valid`` is False.
         valid: (h, w) bool: pixels with a usable measurement. Any other pixel is unknown: it carves no visual hull,
             counts as no ambient and enters no loss and no score.
-        found: what was found (for ``metrics.json`` and the log): ``displacement_max_px``, ``valid_fraction``,
-            ``shake_px`` (column, row) [px of the full sensor], the shares of the ray grid's pixels left out
-            as ``saturated``, ``occluded`` (no texture in the reference), ``unmeasured`` (no estimate from the
-            flow) and ``rejected`` (outlier vectors), ``normalise_px`` (the flow's width), ``flow_factor``
-            (:func:`shrink_factor`), ``noise``
-            (one exposure's noise [share of full scale] where the view sees no flame,
-            :func:`~nerif.sensing.noise.residual_noise`; None where too few pixels are usable), ``clipped``
-            (:func:`clipped_share`) and :func:`images_compared`'s ``difference_rms`` and ``texture_ratio``.
+        found: what was found (:class:`~nerif.sensing.findings.Findings`: the shares left out for each cause, the
+            shake, the noise (:func:`noise_of`), :func:`clipped_share`, :func:`images_compared`'s figures...).
         distorted: (H, W) the distorted image the flow compared (the flame's light taken off where it was
             recorded), what an image term fits.
         flow: (H, W, 2) the flow itself on the images' grid [px of that grid], kept where asked for, else None.
@@ -60,7 +55,7 @@ class ViewMeasurement:
 
     displacement: np.ndarray
     valid: np.ndarray
-    found: dict = field(default_factory=dict)
+    found: Findings = field(default_factory=Findings)
     distorted: Optional[np.ndarray] = None
     flow: Optional[np.ndarray] = None
     left_out: Optional[np.ndarray] = None
@@ -123,7 +118,8 @@ def _either(a: Optional[np.ndarray], b: Optional[np.ndarray]) -> Optional[np.nda
 @MEASUREMENT.register("default")
 def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_px: tuple[int, int],
                  image_binning: int = 1, region: Optional[np.ndarray] = None, quiet: Optional[np.ndarray] = None,
-                 flame: Optional[np.ndarray] = None, hidden: Optional[np.ndarray] = None, name: str = "", keep_flow: bool = False, saturation: bool = True, occlusion_fraction: float = 0.25,
+                 flame: Optional[np.ndarray] = None, hidden: Optional[np.ndarray] = None, name: str = "",
+                 keep_flow: bool = False, saturation: bool = True, occlusion_fraction: float = 0.25,
                  shake: bool = True, median_threshold: Optional[float] = 2.0, median_eps_px: float = 0.1,
                  flow_factor="auto") -> ViewMeasurement:
     """Measure one view.
@@ -153,70 +149,99 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     """
     h, w = grid_px
     H, W = reference.shape
-    valid = np.ones((h, w), bool) if region is None else np.asarray(region, dtype=bool).copy()
-    cause = np.where(valid, 0, CAUSES.index("outside the region")).astype(np.uint8)
-    # the texture detectors and the flow read the images made ``f`` times smaller where the texture spans many pixels
-    scale = texture_scale_px(reference)
-    f = shrink_factor(scale, flow_factor)
-    small = shrunk(reference, f)
-    # the texture's own width [px of the small images], measured once for every detector
-    width = texture_width(small, scale if f == 1 else None)
-    contrast = local_contrast(small, width)  # the reference's texture, read by two steps
+    kept = _Kept(region, h, w)
+    f, small, width, contrast = _texture(reference, flow_factor)
     found = images_compared(shrunk(distorted, f), small, width, contrast)
     found.update(flow_factor=f, clipped=clipped_share(distorted, reference))  # on the images as recorded
     detected = enlarged(occluded(small, occlusion_fraction, width, contrast), H, W) if occlusion_fraction else None
     for what, unreadable in (("saturated", saturated(distorted, reference, width_px=f * width) if saturation else None),
                              ("occluded", _either(detected, hidden))):
-        lost = _on_grid(unreadable, h, w) & valid if unreadable is not None else np.zeros((h, w), bool)
-        found[what] = float(lost.mean())
-        cause[lost] = CAUSES.index(what)
-        valid &= ~lost
+        found[what] = kept.drop(_on_grid(unreadable, h, w) if unreadable is not None else None, what)
     if flame is not None:
         distorted = without_flame_light(distorted, flame)
-    if isinstance(flow.get("normalise_px"), (int, float)):  # set in px of the images as recorded
-        flow = {**flow, "normalise_px": flow["normalise_px"] / f}
-    u_small, normalise_px = estimate(flow, shrunk(distorted, f), small, width)
-    u_image = enlarged(u_small, H, W)
-    found["normalise_px"] = f * normalise_px if normalise_px else normalise_px
+    u_image, found["normalise_px"] = _flow(flow, distorted, small, f, width)
     u = resample(u_image, h, w).astype(np.float32) * np.float32(image_binning)  # px of the full sensor
-    unmeasured = valid & ~np.isfinite(u).all(-1)
-    found["unmeasured"] = float(unmeasured.mean())
-    cause[unmeasured] = CAUSES.index("unmeasured")
-    valid &= ~unmeasured
-    s = np.zeros(2)
-    if shake:
-        s, where = rigid_shift(u, valid, quiet)
-        u -= s.astype(np.float32)
-        log.debug("%s: shake read %s", name, where)
+    found["unmeasured"] = kept.drop(~np.isfinite(u).all(-1), "unmeasured")
+    s = _take_off_shake(u, kept.valid, quiet, name) if shake else np.zeros(2)
     found["shake_px"] = [float(s[0]), float(s[1])]
-    rejected = median_test(u, valid, median_threshold, median_eps_px) if median_threshold else np.zeros((h, w), bool)
-    found["rejected"] = float(rejected.mean())
-    cause[rejected] = CAUSES.index("rejected")
-    valid &= ~rejected
+    found["rejected"] = kept.drop(median_test(u, kept.valid, median_threshold, median_eps_px)
+                                  if median_threshold else None, "rejected")
+    valid = kept.valid
     u[~valid] = np.nan
     peak = float(np.linalg.norm(u[valid], axis=-1).max()) if valid.any() else 0.0
     found.update(displacement_max_px=peak, valid_fraction=float(valid.mean()),
                  outside_px=outside_reach(u, valid, quiet),
                  noise=noise_of(distorted, reference, u_image, valid, quiet, f * width))
-    say(found, name, region)
-    return ViewMeasurement(u, valid, found, distorted, u_image if keep_flow else None, cause)
+    findings = Findings(**found)
+    say(findings, name, region)
+    return ViewMeasurement(u, valid, findings, distorted, u_image if keep_flow else None, kept.cause)
 
 
-def say(found: dict, name: str, region: Optional[np.ndarray] = None) -> None:
+def _texture(reference: np.ndarray, flow_factor) -> tuple[int, np.ndarray, float, np.ndarray]:
+    """How the texture detectors and the flow read ``reference`` (H, W): made ``f`` times smaller where its texture
+    spans many pixels (``flow_factor``: :func:`shrink_factor`'s setting); returns ``f``, the reference so, its
+    texture's own width [px of the small images, measured once for every detector] and its local contrast there."""
+    scale = texture_scale_px(reference)
+    f = shrink_factor(scale, flow_factor)
+    small = shrunk(reference, f)
+    width = texture_width(small, scale if f == 1 else None)
+    return f, small, width, local_contrast(small, width)
+
+
+def _take_off_shake(u: np.ndarray, valid: np.ndarray, quiet: Optional[np.ndarray], name: str) -> np.ndarray:
+    """The camera's rigid shift between the exposures (:func:`rigid_shift`) read on ``u`` (h, w, 2) [px of the full
+    sensor] and taken off it in place; returns it (2,)."""
+    s, where = rigid_shift(u, valid, quiet)
+    u -= s.astype(np.float32)
+    log.debug("%s: shake read %s", name, where)
+    return s
+
+
+def _flow(flow: dict, distorted: np.ndarray, small: np.ndarray, f: int, width: float) -> tuple[np.ndarray, object]:
+    """(H, W, 2) the flow [px of the images as recorded] of ``distorted`` (H, W) against the reference, measured on
+    both made ``f`` times smaller (``small``: the reference so; ``width``: its texture's width there), and the
+    normalisation window it used [px of the images as recorded; None where it used none]."""
+    if isinstance(flow.get("normalise_px"), (int, float)):  # set in px of the images as recorded
+        flow = {**flow, "normalise_px": flow["normalise_px"] / f}
+    u_small, normalise_px = estimate(flow, shrunk(distorted, f), small, width)
+    return enlarged(u_small, *distorted.shape), (f * normalise_px if normalise_px else normalise_px)
+
+
+class _Kept:
+    """The pixels of a ray grid (h, w) a view's measurement keeps, and why it left out the others (``cause``,
+    an index of :data:`CAUSES` each; 0: kept)."""
+
+    def __init__(self, region: Optional[np.ndarray], h: int, w: int):
+        self.valid = np.ones((h, w), bool) if region is None else np.asarray(region, dtype=bool).copy()
+        self.cause = np.where(self.valid, 0, CAUSES.index("outside the region")).astype(np.uint8)
+
+    def drop(self, lost: Optional[np.ndarray], why: str) -> float:
+        """Leave out the kept pixels of ``lost`` ((h, w) bool, or None: none) for ``why`` (a :data:`CAUSES`
+        name); returns their share of the grid."""
+        if lost is None:
+            return 0.0
+        lost = lost & self.valid
+        self.cause[lost] = CAUSES.index(why)
+        self.valid &= ~lost
+        return float(lost.mean())
+
+
+def say(found: Findings, name: str, region: Optional[np.ndarray] = None) -> None:
     """The log's line of one view's measurement (``found``, :class:`ViewMeasurement`'s), and a warning where it
     keeps less than :data:`LOST_WARNING` of its ``region`` (None: the whole view), naming the causes."""
-    left = ", ".join(f"{100 * found[k]:.1f} % {k}" for k in ("saturated", "occluded", "unmeasured", "rejected")
-                     if found[k] > 0)
-    s = found["shake_px"]
+    left = ", ".join(f"{100 * share:.1f} % {k}" for k, share in (
+        ("saturated", found.saturated), ("occluded", found.occluded), ("unmeasured", found.unmeasured),
+        ("rejected", found.rejected)) if share > 0)
+    s = found.shake_px
     log.info("%s: displacement up to %.2f px; shake (%+.3f, %+.3f) px taken off%s%s", name or "view",
-             found["displacement_max_px"], s[0], s[1],
-             f"; flow normalised over {found['normalise_px']:.1f} px" if found["normalise_px"] else "",
+             found.displacement_max_px, s[0], s[1],
+             f"; flow normalised over {found.normalise_px:.1f} px" if found.normalise_px else "",
              f"; left out: {left}" if left else "")
     region_share = float(np.mean(region)) if region is not None else 1.0
-    if region_share > 0 and found["valid_fraction"] < LOST_WARNING * region_share:
+    if region_share > 0 and found.valid_fraction < LOST_WARNING * region_share:
         log.warning("%s: %.0f %% of its region of interest has no usable displacement (%s): look at its images; "
                     "the settings are measure.* and flow.*", name or "view",
-                    100 * (1 - found["valid_fraction"] / region_share), left)
+                    100 * (1 - found.valid_fraction / region_share), left)
 
 
 def measure_cached(cache_dir, measure: dict, distorted: np.ndarray, reference: np.ndarray, name: str = "",
@@ -239,7 +264,7 @@ def measure_cached(cache_dir, measure: dict, distorted: np.ndarray, reference: n
     def compute() -> dict:
         m = MEASUREMENT.build(measure, distorted=distorted, reference=reference, name=name, **inputs)
         computed.append(m)
-        arrays = {"displacement": m.displacement, "valid": m.valid, "found": np.array(json.dumps(m.found, default=float))}
+        arrays = {"displacement": m.displacement, "valid": m.valid, "found": np.array(json.dumps(m.found.report(), default=float))}
         if m.left_out is not None:
             arrays["left_out"] = m.left_out
         if m.distorted is not distorted:  # the flame's light taken off: not the image given
@@ -253,7 +278,7 @@ def measure_cached(cache_dir, measure: dict, distorted: np.ndarray, reference: n
     arrays = cached_arrays(cache_dir, "measured", payload, compute)
     if computed:
         return computed[0], False
-    found = json.loads(str(arrays["found"]))
+    found = Findings.read(json.loads(str(arrays["found"])))
     say(found, name, inputs.get("region"))
     return ViewMeasurement(arrays["displacement"], arrays["valid"], found, arrays.get("distorted", distorted),
                            arrays.get("flow"), arrays.get("left_out")), True

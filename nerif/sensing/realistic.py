@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
@@ -115,27 +116,91 @@ def exposures(background: torch.Tensor, u: torch.Tensor, blur_px: float, noise_v
     return tuple(np.clip(add_noise(x, noise_variance, generator).numpy(), 0.0, 1.0) for x in (reference, distorted))
 
 
-def check_settings(camera: Camera, rig_binning: int, *, pattern: dict, flow: dict, aperture_rays: int,
-                   noise_variance: float, image_binning: int, render_binning: int, luminosity: float,
-                   gain_drift: float, gain_ramp: float, shake_px: float, burner_radius_mm: float, pixel_samples: int
-                   ) -> None:
-    """One sentence for a setting of :func:`realistic` that cannot run (``camera``: a training camera)."""
-    PATTERNS.get(pattern["name"]), FLOW.get(flow["name"])
-    check_flow(flow)  # settings that cannot measure say so here, not as an empty view each after the rendering
-    if noise_variance < 0:
-        raise ValueError(f"noise variance must be >= 0, got {noise_variance}")
-    if not luminosity >= 0 or not gain_drift > -1 or not gain_ramp > -1 or not shake_px >= 0 or \
-            not burner_radius_mm >= 0:
-        raise ValueError(f"data.sensor.luminosity={luminosity}, data.sensor.shake_px={shake_px} and "
-                         f"data.sensor.burner_radius_mm={burner_radius_mm} must be at least 0, "
-                         f"data.sensor.gain_drift={gain_drift} and data.sensor.gain_ramp={gain_ramp} above -1")
-    if not (isinstance(pixel_samples, int) and 1 <= pixel_samples <= 16):
-        raise ValueError(f"data.sensor.pixel_samples={pixel_samples} must be a whole number from 1 to 16")
-    aperture_points(aperture_rays, 1.0)
-    for b, what in ((image_binning, "image_binning"), (render_binning, "render_binning")):
-        if b < 1 or rig_binning % b and b % rig_binning:
-            raise ValueError(f"data.sensor.{what}={b} must divide or be a multiple of the rig's binning {rig_binning}")
-        camera.unbinned(rig_binning).binned(b)
+@dataclass(frozen=True)
+class Sensor:
+    """The settings of the realistic chain that shape each view's two exposures (``data.sensor``; each as
+    :func:`realistic` documents it), checked before the long work by :meth:`check`."""
+
+    aperture_rays: int
+    wavelength_um: float
+    noise_variance: float
+    image_binning: int
+    render_binning: int
+    seed: int
+    luminosity: float
+    gain_drift: float
+    gain_ramp: float
+    shake_px: float
+    burner_radius_mm: float
+    burner_top_mm: Optional[float]
+    pixel_samples: int
+
+    def check(self, camera: Camera, rig_binning: int, pattern: dict, flow: dict) -> None:
+        """One sentence for a setting that cannot run (``camera``: a training camera; ``pattern``, ``flow``: the
+        configs the chain builds)."""
+        PATTERNS.get(pattern["name"]), FLOW.get(flow["name"])
+        check_flow(flow)  # settings that cannot measure say so here, not as an empty view each after the rendering
+        if self.noise_variance < 0:
+            raise ValueError(f"noise variance must be >= 0, got {self.noise_variance}")
+        if not self.luminosity >= 0 or not self.gain_drift > -1 or not self.gain_ramp > -1 or \
+                not self.shake_px >= 0 or not self.burner_radius_mm >= 0:
+            raise ValueError(f"data.sensor.luminosity={self.luminosity}, data.sensor.shake_px={self.shake_px} and "
+                             f"data.sensor.burner_radius_mm={self.burner_radius_mm} must be at least 0, "
+                             f"data.sensor.gain_drift={self.gain_drift} and data.sensor.gain_ramp={self.gain_ramp} "
+                             "above -1")
+        if not (isinstance(self.pixel_samples, int) and 1 <= self.pixel_samples <= 16):
+            raise ValueError(f"data.sensor.pixel_samples={self.pixel_samples} must be a whole number from 1 to 16")
+        aperture_points(self.aperture_rays, 1.0)
+        for b, what in ((self.image_binning, "image_binning"), (self.render_binning, "render_binning")):
+            if b < 1 or rig_binning % b and b % rig_binning:
+                raise ValueError(f"data.sensor.{what}={b} must divide or be a multiple of the rig's binning "
+                                 f"{rig_binning}")
+            camera.unbinned(rig_binning).binned(b)
+
+    def expose(self, delta: torch.Tensor, box: ProbeBox, cam: Camera, rig_binning: int, pattern: dict, v: int,
+               step_mm: float, cache_dir, field_key: str) -> dict:
+        """View ``v`` (camera ``cam``, of the rig's binning) of the field ``delta`` on ``box``: ``u_ren`` (h, w, 2)
+        the true displacements on the render grid [px of the images], ``reference`` and ``distorted`` (H, W) its two
+        exposures on the image grid, ``coc_px`` the circle of confusion [px of the images], ``shake`` (2,) [px of the
+        full sensor], ``occluded`` (the share of the ray grid's blocks that see some of the burner tube, or None)."""
+        img_cam = cam.unbinned(rig_binning).binned(self.image_binning)
+        ren_cam = cam.unbinned(rig_binning).binned(self.render_binning)
+        H, W = img_cam.height, img_cam.width
+        d_ren = ren_cam.pixel_directions(torch.float64).to(delta.device)
+        u_ren = true_displacements(delta, box, ren_cam, img_cam, d_ren, self.aperture_rays, step_mm, cache_dir,
+                                   field_key)
+        coc = circle_of_confusion(img_cam, self.wavelength_um)
+        glow = self.luminosity * flame_light(delta, box, img_cam, coc["d_mm"] / img_cam.pitch_mm, step_mm) \
+            if self.luminosity > 0 else None
+        top_mm = -0.5 * float(box.extent_mm[1]) if self.burner_top_mm is None else float(self.burner_top_mm)
+        tube = burner_pixels(img_cam, self.burner_radius_mm, top_mm) if self.burner_radius_mm > 0 else None
+        background = torch.as_tensor(PATTERNS.build(pattern, height=H, width=W, seed=self.seed * 1009 + v,
+                                                     samples=self.pixel_samples))
+        shake = np.random.default_rng(self.seed * 7919 + v).normal(0.0, self.shake_px, 2)  # px of the full sensor
+        u_img = torch.as_tensor(resample(u_ren, H, W) + (shake / self.image_binning).astype(np.float32))
+        reference, distorted = exposures(background, u_img, coc["d_diff_mm"] / img_cam.pitch_mm, self.noise_variance,
+                                         self.gain_drift, glow, torch.Generator().manual_seed(self.seed * 1009 + v),
+                                         self.gain_ramp, tube, self.pixel_samples)
+        occluded = None
+        if tube is not None:  # the share of the ray grid's blocks that see some of the tube
+            occluded = np.float64((resample(tube.astype(np.float32), cam.height, cam.width) > 0).mean())
+        return dict(u_ren=u_ren, reference=reference, distorted=distorted, coc_px=coc["d_mm"] / img_cam.pitch_mm,
+                    shake=shake, occluded=occluded)
+
+
+def _view_record(x: dict, m, cam: Camera, pixel: torch.Tensor, image_binning: int) -> tuple[dict, np.ndarray]:
+    """One view's fields of the :class:`SensingRecord` from what the chain made (``x``, :meth:`Sensor.expose`) and
+    measured (``m``, a :class:`nerif.sensing.measurement.ViewMeasurement`) on the ray grid of ``cam``, and the
+    squared errors (n, 2) of the measured displacements at the training rays' ``pixel`` [px^2 of the images]."""
+    pix = pixel.cpu().numpy()
+    u_true = resample(x["u_ren"], cam.height, cam.width)
+    u_est = m.displacement / np.float32(image_binning)  # the figures' unit: px of the images' grid
+    err = (u_est.reshape(-1, 2)[pix] - u_true.reshape(-1, 2)[pix]) ** 2
+    return dict(displacement_px=m.displacement, valid=m.valid, left_out=m.left_out,
+                reference=to_uint8(x["reference"]), distorted=to_uint8(x["distorted"]),
+                u_true=u_true.astype(np.float32), u_est=u_est.astype(np.float32),
+                circle_of_confusion_px=np.float64(x["coc_px"]), shake_true_px=x["shake"],
+                occluded_true=x["occluded"], found=m.found.report()), err[np.isfinite(err).all(-1)]
 
 
 @SENSING.register("realistic")
@@ -177,55 +242,24 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         capture's: :func:`nerif.data.scene.scene_from_displacements`) and what the chain saw and measured in each
         view (:class:`nerif.sensing.record.SensingRecord`).
     """
-    render_binning = render_binning or rig_binning
+    sensor = Sensor(aperture_rays, wavelength_um, noise_variance, image_binning, render_binning or rig_binning,
+                    seed, luminosity, gain_drift, gain_ramp, shake_px, burner_radius_mm, burner_top_mm, pixel_samples)
     measure = dict(measure or {"name": "default"})
     MEASUREMENT.get(measure["name"])
-    check_settings(cameras[0], rig_binning, pattern=pattern, flow=flow, aperture_rays=aperture_rays,
-                   noise_variance=noise_variance, image_binning=image_binning, render_binning=render_binning,
-                   luminosity=luminosity, gain_drift=gain_drift, gain_ramp=gain_ramp, shake_px=shake_px,
-                   burner_radius_mm=burner_radius_mm, pixel_samples=pixel_samples)  # before the long work
-    top_mm = -0.5 * float(box.extent_mm[1]) if burner_top_mm is None else float(burner_top_mm)
+    sensor.check(cameras[0], rig_binning, pattern, flow)  # before the long work
     step_mm = step_mm or box.voxel_mm
     field_key = hashlib.sha256(delta.cpu().numpy().tobytes()).hexdigest()
     per_view = []  # each view's fields of the record
     quiet = outside_the_box(cameras, pixel, view_start)  # pixels whose ray misses the box
     sq_err, count = 0.0, 0
     for v, cam in enumerate(cameras):
-        img_cam = cam.unbinned(rig_binning).binned(image_binning)
-        ren_cam = cam.unbinned(rig_binning).binned(render_binning)
-        H, W = img_cam.height, img_cam.width
-        d_ren = ren_cam.pixel_directions(torch.float64).to(delta.device)
-        u_ren = true_displacements(delta, box, ren_cam, img_cam, d_ren, aperture_rays, step_mm, cache_dir, field_key)
-        coc = circle_of_confusion(img_cam, wavelength_um)
-        glow = luminosity * flame_light(delta, box, img_cam, coc["d_mm"] / img_cam.pitch_mm, step_mm) \
-            if luminosity > 0 else None
-        tube = burner_pixels(img_cam, burner_radius_mm, top_mm) if burner_radius_mm > 0 else None
-        background = torch.as_tensor(PATTERNS.build(pattern, height=H, width=W, seed=seed * 1009 + v,
-                                                     samples=pixel_samples))
-        shake = np.random.default_rng(seed * 7919 + v).normal(0.0, shake_px, 2)  # px of the full sensor
-        u_img = torch.as_tensor(resample(u_ren, H, W) + (shake / image_binning).astype(np.float32))
-        reference, distorted = exposures(background, u_img, coc["d_diff_mm"] / img_cam.pitch_mm, noise_variance,
-                                         gain_drift, glow, torch.Generator().manual_seed(seed * 1009 + v), gain_ramp,
-                                         tube, pixel_samples)
-        occluded = None
-        if tube is not None:  # the share of the ray grid's blocks that see some of the tube
-            occluded = np.float64((resample(tube.astype(np.float32), cam.height, cam.width) > 0).mean())
-        sl = slice(int(view_start[v]), int(view_start[v + 1]))
-        pix = pixel[sl].cpu().numpy()
-        m = MEASUREMENT.build(measure, distorted=distorted, reference=reference, flow=flow,
+        x = sensor.expose(delta, box, cam, rig_binning, pattern, v, step_mm, cache_dir, field_key)
+        m = MEASUREMENT.build(measure, distorted=x["distorted"], reference=x["reference"], flow=flow,
                               grid_px=(cam.height, cam.width), image_binning=image_binning,
                               quiet=quiet[v], name=cam.name)
-
-        u_true_t = resample(u_ren, cam.height, cam.width)
-        u_est_t = m.displacement / np.float32(image_binning)  # the figures' unit: px of the images' grid
-        err = (u_est_t.reshape(-1, 2)[pix] - u_true_t.reshape(-1, 2)[pix]) ** 2
-        err = err[np.isfinite(err).all(-1)]
+        record, err = _view_record(x, m, cam, pixel[int(view_start[v]):int(view_start[v + 1])], image_binning)
+        per_view.append(record)
         sq_err, count = sq_err + float(err.sum()), count + len(err)
-        per_view.append(dict(displacement_px=m.displacement, valid=m.valid, left_out=m.left_out,
-                             reference=to_uint8(reference), distorted=to_uint8(distorted),
-                             u_true=u_true_t.astype(np.float32), u_est=u_est_t.astype(np.float32),
-                             circle_of_confusion_px=np.float64(coc["d_mm"] / img_cam.pitch_mm),
-                             shake_true_px=shake, occluded_true=occluded, found=m.found))
         log.info("%s: true displacement up to %.2f px, circle of confusion %.1f px", cam.name,
-                 float(np.abs(u_ren).max()), coc["d_mm"] / img_cam.pitch_mm)
+                 float(np.abs(x["u_ren"]).max()), x["coc_px"])
     return None, SensingRecord.of_views(per_view, np.sqrt(sq_err / max(count, 1)))

@@ -7,6 +7,10 @@ from typing import Optional
 
 import numpy as np
 
+from nerif.units import SHARE, declare
+
+declare(occluded_true=SHARE)
+
 
 @dataclass(frozen=True)
 class SensingRecord:

@@ -27,8 +27,13 @@ from nerif.geometry import box_faces
 from nerif.export import atomic_save_torch
 from nerif.masks.backprojection import ambient_faces
 from nerif.registry import Registry
+from nerif.units import declare
 
 log = logging.getLogger(__name__)
+
+declare(ms_per_iteration="ms", ms_per_iteration_mean="ms", iterations="iterations", iteration="iterations",
+        text=("solver", "encoder", "grad", "data_term", "sampler", "mask", "ambient_faces", "flame_crosses_faces"),
+        containers={"history": "(the evaluations during training, each unit by its name here)"})
 SOLVERS = Registry("solver", package="nerif.solvers")
 _COUNTERS = ("iteration", "history", "train_seconds", "step_times")
 
@@ -295,6 +300,15 @@ class IterativeSolver:
         for ``iterations`` more steps on the training ``views`` only, its own random draws from ``seed``, from
         ``lr_factor`` of its peak learning rate. Solvers that can override it (and set :attr:`trains_members`)."""
         raise NotImplementedError
+
+    def train(self, stop: Optional[Callable[[], bool]] = None) -> bool:
+        """Steps to :attr:`iterations` without evaluations or checkpoints (an ensemble's member); ``stop()`` true ends
+        it between steps. Returns whether it ran to the end."""
+        while self.iteration < self.iterations:
+            if stop is not None and stop():
+                return False
+            self.step()
+        return True
 
     def start_from(self, path: Path) -> None:
         """Start from the final state of another run on data of the same rig and probe box (the previous frame

@@ -98,6 +98,11 @@ class DeflectionTerm:
         weight = self.ray_weight[batch.index] if self.ray_weight is not None else None
         return deflection_terms(eps, self.scene.observed[batch.index], weight)
 
+    def for_member(self) -> "DeflectionTerm":
+        """A new term, not set up, that an ensemble's member trains on (:meth:`nerif.solvers.neural.NeuralSolver.member`):
+        the flow's deflections, noise-weighted as this term's."""
+        return DeflectionTerm(self.noise_weighted)
+
     def parameter_groups(self) -> list[dict]:
         """The term's own parameters, fitted with the field (optimiser groups); none here."""
         return []
@@ -120,7 +125,7 @@ def noise_weights(scene: Scene) -> Optional[torch.Tensor]:
     alike): ``1 / sigma_v^2`` over its mean over the views (maximum likelihood: a view
     twice as noisy counts a quarter; views of one noise level count 1 each); None where the scene holds no reading
     (a synthetic scene's deflections)."""
-    noise = (scene.measured or {}).get("noise")
+    noise = [f.noise for f in scene.findings] if scene.findings else None
     known = [n for n in noise or () if n]
     if not known:
         return None
@@ -381,6 +386,10 @@ class ImageTerm(DeflectionTerm):
         pick = torch.rand((n_cells, len(self.weights)), generator=self.batches.generator,
                           device=self.weights.device).argsort(-1)[:, :m]
         return self.pixel_offsets[pick], self.weights[pick]
+
+    def for_member(self) -> DeflectionTerm:
+        """The flow's own term (:meth:`DeflectionTerm.for_member`): members train on the observed deflections."""
+        return self.flow.for_member()
 
     def parameter_groups(self) -> list[dict]:
         """The views' shake corrections [image px], at ``shake_lr``, without weight decay."""

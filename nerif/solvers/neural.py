@@ -14,15 +14,14 @@ import torch
 
 from nerif.data import Scene
 from nerif.encoders import ENCODERS
-from nerif.data.phantoms import read_volume
-from nerif.field import (NeuralField, averaged_field, check_truth_within, fit_to_volume, prior_interval,
-                         prior_saturation, prior_source)
+from nerif.field import NeuralField, check_truth_within, perturb_tables, prior_interval, prior_saturation, prior_source
 from nerif.losses import AmbientBoundary, TotalVariation, weighted_sum
 from nerif.renderers import SAMPLERS, DeflectionRenderer
 from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_faces
-from nerif.solvers.batches import RayBatcher, check_views_per_batch
+from nerif.solvers.batches import RayBatcher
 from nerif.solvers.data_terms import DATA_TERMS
-from nerif.solvers.stages import Stage, StagePlan, whose, choose
+from nerif.solvers.stages import HeldoutChoice, Stage, StagePlan
+from nerif.solvers.training import Optimisation, SampleCounts, Training, allocations, warm_start
 
 log = logging.getLogger(__name__)
 
@@ -42,21 +41,12 @@ class NeuralSolver(IterativeSolver):
         sampler: a :data:`SAMPLERS` config. loss: the ambient boundary condition (``ambient_faces``: ``auto`` or
             a list, ``crossed_cover``, ``ambient_fallback``, ``ambient_weight``, ``ambient_points``; see
             :class:`nerif.losses.AmbientBoundary` and :meth:`IterativeSolver.resolve_ambient_faces`).
-        train: ``iterations``, ``eval_every``, ``stop_when_converged`` (stop once the best deflection RMSE on
-            the fixed evaluation rays over the last ``stop_patience`` evaluations improves on the best before them
-            by less than this fraction; null: never),
-            ``rays_per_batch``, ``views_per_batch`` (a number, or ``all``),
-            ``outside_fraction`` (share of each view's rays drawn outside its 2-D mask), Adam's ``lr``,
-            ``betas``, ``eps`` with the cosine floor ``lr_min``, and ``table_decay``: each step multiplies the
-            encoder's parameters by ``1 - lr table_decay`` (AdamW), so that table entries no ray constrains fade
-            to zero instead of wandering under Adam's normalised steps. ``init_volume``: a ``reconstruction.npz``
-            on this probe grid that the field is first fit to (``init_iterations``; :func:`nerif.field.fit_to_volume`).
-            ``ema_decay``: evaluations and outputs use an exponential moving average of the trained weights
-            (:func:`nerif.field.averaged_field`; 0: the last weights), training itself is unchanged.
+        train: ``iterations``, ``eval_every`` (:class:`IterativeSolver`) and the rest: :class:`Training`.
         metrics, seed, label: see :class:`IterativeSolver`.
     """
 
     name = "nerif"
+    allocations = staticmethod(allocations)
     starts_from_previous = True
     trains_members = True
 
@@ -64,43 +54,17 @@ class NeuralSolver(IterativeSolver):
                  train: Mapping, metrics: Mapping, seed: int, label: str, data_term: Optional[Mapping] = None):
         super().__init__(iterations=train["iterations"], eval_every=train["eval_every"], metrics=metrics, seed=seed,
                          label=label)
-        self.rays_per_batch = int(train["rays_per_batch"])
-        if self.rays_per_batch < 1:
-            raise ValueError(f"rays per batch must be at least 1, got {self.rays_per_batch}")
-        check_views_per_batch(train["views_per_batch"])
-        self.views_per_batch = train["views_per_batch"]
-        self.stop_tol = train["stop_when_converged"]
-        if self.stop_tol is not None and not 0.0 < float(self.stop_tol) < 1.0:
-            raise ValueError(f"train.stop_when_converged={self.stop_tol}: a relative improvement within (0, 1), or null")
-        self.stop_patience = int(train["stop_patience"])
-        if self.stop_patience < 1:
-            raise ValueError(f"train.stop_patience={self.stop_patience}: at least 1 evaluation")
-        self.outside_fraction = float(train["outside_fraction"])
-        if not 0.0 <= self.outside_fraction < 1.0:
-            raise ValueError(f"outside_fraction must be within [0, 1), got {self.outside_fraction}")
+        self.training = Training.read(train)
         self.weights = {k: float(v) for k, v in grad["weights"].items()}
         self.stencil = grad["stencil"]
-        if self.stencil not in ("axes", "across"):
-            raise ValueError(f"grad.stencil must be 'axes' or 'across', got '{self.stencil}'")
-        if not any(w > 0 for w in self.weights.values()):
-            raise ValueError("every gradient-loss weight is zero: nothing to train on (set grad.weights)")
+        DeflectionRenderer.check(self.weights, self.stencil)
         check_faces(loss["ambient_faces"])
         check_faces(loss["ambient_fallback"], "loss.ambient_fallback", auto=False)
         self.encoder = ENCODERS.build(encoder)
         self.sampler = SAMPLERS.build(sampler)
         self.data_term = DATA_TERMS.build(data_term or {"name": "flow"})
         self.hidden, self.prior = tuple(field["hidden"]), field["prior"]
-        self.table_decay = float(train["table_decay"])
-        self.init_volume, self.init_iterations = train["init_volume"], int(train["init_iterations"])
-        self.ema_decay = float(train["ema_decay"])
-        if not 0.0 <= self.ema_decay < 1.0:
-            raise ValueError(f"train.ema_decay={self.ema_decay}: a decay within [0, 1) (0: no average)")
-        if self.table_decay < 0:
-            raise ValueError(f"train.table_decay={self.table_decay}: a decay rate of at least 0")
-        if self.init_volume is not None and not Path(self.init_volume).expanduser().is_file():
-            raise FileNotFoundError(f"train.init_volume: volume file {self.init_volume} does not exist")
         self.loss_cfg = dict(loss)
-        self.optim_cfg = {k: train[k] for k in ("lr", "betas", "eps", "lr_min")}
         self.labels.update(encoder=encoder["name"], grad=grad["name"])
 
     def setup(self, scene: Scene, masks) -> "NeuralSolver":
@@ -120,11 +84,15 @@ class NeuralSolver(IterativeSolver):
         b = AmbientBoundary(scene.box, faces, lc["ambient_weight"], lc["ambient_points"])
         self.boundary = b if b.active else None
         self.generator = torch.Generator(self.device).manual_seed(self.seed)
-        self.batches = RayBatcher(scene, masks.inside, self.rays_per_batch, self.views_per_batch,
-                                  self.outside_fraction, self.generator)
+        t = self.training
+        self.batches = RayBatcher(scene, masks.inside, t.rays_per_batch, t.views_per_batch, t.outside_fraction,
+                                  self.generator)
         self.data_term.setup(scene, self.batches, self.iterations, masks)
         self.plan = StagePlan(self.data_term.stages())
-        self.iterations, self.previous = self.plan.iterations, None  # previous: the field the chooser competes with
+        self.iterations = self.plan.iterations
+        figures = (lambda: self.evaluation.stage_figures(self.predict, self.reconstruction, self.data_term))
+        self.choice = HeldoutChoice(self.plan, figures if scene.heldout is not None else None,
+                                    self.evaluation.physical)
         if self.data_term.fitted != "flow":
             self.labels["data_term"] = self.data_term.fitted
         for stage, end in zip(self.plan.stages, self.plan.ends):
@@ -133,65 +101,30 @@ class NeuralSolver(IterativeSolver):
         rms = float(scene.eps[self.batches.inside()].double().norm(dim=-1).pow(2).mean().sqrt()) / scene.scale
         tv = TotalVariation(scene.box, lc["tv_weight"], lc["tv_points"], rms)
         self.tv = tv if tv.active else None
-        self.optimizer = self._optimizer()
-        self.scheduler = self.plan.cosine(self.optimizer, 0, self.optim_cfg["lr_min"])
-        if self.init_volume is not None:
-            self._warm_start(self.init_volume)
-        self.average = averaged_field(self.field, self.ema_decay, self.rate) if self.ema_decay > 0 else None
+        if t.init_volume is not None:
+            t0 = time.perf_counter()
+            warm_start(self.field, scene.box, t.init_volume, prior, t.init_iterations, self.generator)
+            self.train_seconds += time.perf_counter() - t0
+        self.optimisation = Optimisation(self.field, self.data_term.parameter_groups(), t, self.plan, 0)
         # central-difference step: b_min / (2 K), K the most samples per ray
         self.renderer = DeflectionRenderer(self.weights, self.stencil,
                                            scene.box.shortest_side_mm / (2 * self.sampler.samples_per_ray),
                                            scene.perpendicular_only, self.sampler.samples_per_ray)
-        self.samples_seen = 0
-        self.rays_seen = 0
-        self.samples_max = 0
-        self.rays_skipped = 0
+        self.counts = SampleCounts()
         return self
 
-    def _optimizer(self) -> torch.optim.AdamW:
-        """AdamW on the field (the encoder's tables with ``train.table_decay``, the rest without) and the data
-        term's own parameters, at ``train.lr``."""
-        oc = self.optim_cfg
-        enc = list(self.field.encoder.parameters())
-        rest = [p for p in self.field.parameters() if all(p is not q for q in enc)]
-        groups = [{"params": rest, "weight_decay": 0.0}] + ([{"params": enc, "weight_decay": self.table_decay}]
-                                                            if enc else []) + self.data_term.parameter_groups()
-        return torch.optim.AdamW(groups, lr=oc["lr"], betas=tuple(oc["betas"]), eps=oc["eps"],
-                                 fused=self.device.type == "cuda")
-
-    def _end_of_stage(self) -> None:
-        """Where a stage ends and another begins: the field it leaves and what that leaves of the held-out views,
-        where the last stage's field will compete with it; the next stage's learning-rate schedule where it starts
-        one of its own."""
-        ending = self.plan.ending(self.iteration)
-        if ending is None:
-            return
-        if ending is self.plan.before_chooser and self.scene.heldout is not None:
-            weights = {k: v.detach().clone() for k, v in self.estimate.state_dict().items()}
-            self.previous = {"weights": weights, "figures": self.evaluation.stage_figures(
-                self.predict, self.reconstruction, self.data_term)}
-        if self.plan.restarts(self.iteration):
-            self.scheduler = self.plan.cosine(self.optimizer, self.iteration, self.optim_cfg["lr_min"])
-
     def choose_by_heldout(self) -> Optional[str]:
-        """At the end of a run whose last stage chooses (:attr:`Stage.choose`; the images' after the flow's): keeps
-        the field the held-out views prefer (:func:`nerif.solvers.stages.choose`), putting back the one the stage
-        before it left where that one explains them better; records the choice in :attr:`report` and returns the
-        name of the stage whose field it kept (None where nothing was chosen: no such stage, no held-out view, or
-        not finished)."""
-        last, before = self.plan.chooser, self.plan.before_chooser
-        if last is None or self.iteration < self.iterations or "data_term_kept" in self.report:
+        """At the end of a run whose last stage chooses: keeps the field the held-out views prefer
+        (:class:`HeldoutChoice`), putting back the one the stage before it left where that one explains them better;
+        records the choice in :attr:`report` and returns the name of the stage whose field it kept (None where
+        nothing was chosen or the run has not finished)."""
+        if self.iteration < self.iterations or "data_term_kept" in self.report:
             return None
-        if self.previous is None:
-            log.info("data_term=images: no held-out view to choose between the %s and the %s fields by; the %s is "
-                     "kept", whose(before.name), whose(last.name), whose(last.name))
-            return None
-        figures = self.evaluation.stage_figures(self.predict, self.reconstruction, self.data_term)
-        kept, report = choose(before, last, self.previous["figures"], figures, self.evaluation.physical)
+        kept, report = self.choice.choose()
         self.report.update(report)
-        if kept == before.name:
-            self.estimate.load_state_dict(self.previous["weights"])
-            self.field.load_state_dict(self.previous["weights"])
+        if kept is not None and kept != self.plan.chooser.name:
+            self.estimate.load_state_dict(self.choice.previous["weights"])
+            self.field.load_state_dict(self.choice.previous["weights"])
         return kept
 
     def fit(self, **kwargs) -> dict:
@@ -215,57 +148,23 @@ class NeuralSolver(IterativeSolver):
         perturbed), to be trained (:meth:`train`) for ``iterations`` more steps on the observed deflections (the
         flow's term, noise-weighted as set) of the training ``views`` only, with its own optimiser, cosine schedule
         from ``lr_factor`` of each group's peak rate, average and random draws (``seed``). The scene, masks and
-        evaluation are shared, read only: members can train side by side."""
+        evaluation are shared, read only: members can train side by side (:func:`nerif.field.perturb_tables`,
+        :meth:`DeflectionTerm.for_member`)."""
         m = copy.copy(self)
         m.field = copy.deepcopy(self.field)
         m.field.load_state_dict({k: v.detach().clone() for k, v in self.estimate.state_dict().items()})
         m.sampler = copy.deepcopy(self.sampler)
         m.generator = torch.Generator(self.device).manual_seed(int(seed))
         if perturb > 0:
-            with torch.no_grad():
-                for p in m.field.encoder.parameters():
-                    noise = torch.randn(p.shape, generator=m.generator, device=p.device, dtype=p.dtype)
-                    p.add_(noise * (perturb * p.pow(2).mean().sqrt()))
-        flow = getattr(self.data_term, "flow", self.data_term)  # the image term's own flow term, or the flow term
-        term = DATA_TERMS.build({"name": "flow", "noise_weighted": flow.noise_weighted})
-        m.data_term = term.setup(self.scene, self.batches.of_views(views, m.generator), iterations)
+            perturb_tables(m.field, perturb, m.generator)
+        m.data_term = self.data_term.for_member().setup(self.scene, self.batches.of_views(views, m.generator),
+                                                        iterations)
         m.plan = StagePlan([Stage("flow", m.data_term, iterations, lr=lr_factor)], start=self.iteration)
-        m.iterations, m.previous = m.plan.iterations, None
-        m.optimizer = m._optimizer()
-        m.scheduler = m.plan.cosine(m.optimizer, m.iteration, self.optim_cfg["lr_min"])
-        m.average = averaged_field(m.field, self.ema_decay, m.rate) if self.average is not None else None
+        m.iterations, m.choice = m.plan.iterations, HeldoutChoice(m.plan, None, False)
+        m.optimisation = Optimisation(m.field, m.data_term.parameter_groups(), self.training, m.plan, m.iteration)
         m.history, m.step_times, m.report, m.labels = [], [], {}, dict(self.labels)
+        m.counts = copy.copy(self.counts)
         return m
-
-    def train(self, stop=None) -> bool:
-        """Steps to :attr:`iterations` without evaluations or checkpoints (an ensemble's member); ``stop()`` true ends
-        it between steps. Returns whether it ran to the end."""
-        while self.iteration < self.iterations:
-            if stop is not None and stop():
-                return False
-            self.step()
-        return True
-
-    def _warm_start(self, path: str) -> None:
-        """Fit the field to the sigma volume of ``path`` (a ``reconstruction.npz`` of any solver on this probe
-        grid, key ``sigma``) before training on rays."""
-        vol = read_volume(path, "train.init_volume", key="sigma")
-        if vol.shape != tuple(self.scene.box.shape):
-            raise ValueError(f"train.init_volume {path}: shape {vol.shape}, but the probe grid is "
-                             f"{tuple(self.scene.box.shape)}")
-        a, b = self.interval
-        lo, hi = float(vol.min()), float(vol.max())
-        if lo < a - 0.5 * (b - a) or hi > b + 0.5 * (b - a):  # a temperature [K], or another quantity
-            what = " (a temperature in kelvin?)" if lo > 100 else ""
-            raise ValueError(f"train.init_volume {path} holds values {lo:.4g} to {hi:.4g}{what}, far outside the "
-                             f"field's sigma interval [{a:g}, {b:g}]: give a reconstruction.npz of nerif (its sigma "
-                             "is read)")
-        t0 = time.perf_counter()
-        rms = fit_to_volume(self.field, self.scene.box, torch.as_tensor(vol, device=self.device),
-                            self.init_iterations, generator=self.generator)
-        self.train_seconds += time.perf_counter() - t0
-        log.info("warm start: the field fits %s to %.3g (RMS sigma) after %d iterations", path, rms,
-                 self.init_iterations)
 
     def saturation(self, sigma: np.ndarray, failed: str = "") -> dict:
         """:func:`nerif.field.prior_saturation` of ``sigma`` within this field's prior (``failed``: the held-out
@@ -298,11 +197,7 @@ class NeuralSolver(IterativeSolver):
         """One iteration on the next views (:meth:`RayBatcher.views`); returns the loss terms (floats)."""
         t0 = time.perf_counter()
         named, samples = self.batch_loss()
-        loss = named["loss"]
-        self.optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        self.optimizer.step()
-        self.scheduler.step()
+        self.optimisation.step(named["loss"])
         per_ray = samples.per_ray
         # every number of the step in one transfer: one wait for the device per step, not one per number
         stats = torch.stack([t.detach().float() for t in named.values()] +
@@ -311,15 +206,11 @@ class NeuralSolver(IterativeSolver):
         if not math.isfinite(out["loss"]):  # the step that made it is never saved: fit keeps the last checkpoint
             raise DivergenceError(f"the loss became {out['loss']} at iteration {self.iteration}: the run diverged "
                                   "(try a lower train.lr)")
-        if self.average is not None:
-            self.average.update_parameters(self.field)
+        self.optimisation.after_step(self.iteration + 1)
         self._timed(time.perf_counter() - t0)
-        self._end_of_stage()
-        self.samples_seen += len(samples.positions)
-        self.rays_seen += samples.n_rays
-        self.samples_max = max(self.samples_max, int(stats[-2]))
-        self.rays_skipped += int(stats[-1])
-        out.update(lr=self.optimizer.param_groups[0]["lr"],
+        self.choice.after_step(self.iteration, self.estimate)
+        self.counts.add(len(samples.positions), samples.n_rays, int(stats[-2]), int(stats[-1]))
+        out.update(lr=self.optimisation.lr,
                    samples_per_ray=len(samples.positions) / max(samples.n_rays, 1),
                    rays_skipped=stats[-1] / max(samples.n_rays, 1))
         return out
@@ -332,18 +223,11 @@ class NeuralSolver(IterativeSolver):
         """(N, 3) [mm] -> (N,) |sigma| of the trained field: what the occupancy grid thresholds."""
         return self.field(positions).abs()
 
-    def rate(self) -> float:
-        """The learning rate of the next step over its peak (``train.lr``), from 1 down to ``lr_min / lr``."""
-        return self.optimizer.param_groups[0]["lr"] / self.scheduler.base_lrs[0]
-
     # --- evaluation ---
     @property
     def estimate(self) -> NeuralField:
-        """The field that evaluations and outputs use: the average of the trained weights (``train.ema_decay``)
-        once a step has updated it, else the trained field itself."""
-        if self.average is None or int(self.average.n_averaged) == 0:
-            return self.field
-        return self.average.module
+        """The field that evaluations and outputs use (:attr:`Optimisation.estimate`)."""
+        return self.optimisation.estimate
 
     def reconstruction(self) -> np.ndarray:
         """sigma on the scene's probe grid, (nx, ny, nz)."""
@@ -366,22 +250,16 @@ class NeuralSolver(IterativeSolver):
         m["deflection_rmse"] = m[f"deflection_rmse_{self.renderer.fitted_operator}"]
         m.update(ev.heldout_errors(self.predict))
         self.history.append(m)
-        rmses = [h["deflection_rmse"] for h in self.history]
-        if self.stop_tol is not None and len(rmses) > self.stop_patience:
-            # the best of the last `patience` evaluations against the best before them: one noisy evaluation
-            # (Adam early on, one view's batch) does not stop a run
-            before, recent = min(rmses[:-self.stop_patience]), min(rmses[-self.stop_patience:])
-            self.converged = recent > (1.0 - float(self.stop_tol)) * before
+        converged = self.training.converged([h["deflection_rmse"] for h in self.history])
+        self.converged = self.converged if converged is None else converged
         return m
 
     # --- checkpoints ---
     def state_dict(self) -> dict:
-        return {**super().state_dict(), "field": self.field.state_dict(), "optimizer": self.optimizer.state_dict(),
-                "average": None if self.average is None else self.average.state_dict(),
-                "sampler": self.sampler.state_dict(), "scheduler": self.scheduler.state_dict(),
-                "generator": self.generator.get_state(), "samples_seen": self.samples_seen, "rays_seen": self.rays_seen,
-                "samples_max": self.samples_max, "rays_skipped": self.rays_skipped, "converged": self.converged,
-                "data_term": self.data_term.state_dict(), "previous_stage": self.previous}
+        return {**super().state_dict(), **self.optimisation.state_dict(), **self.counts.state_dict(),
+                "field": self.field.state_dict(), "sampler": self.sampler.state_dict(),
+                "generator": self.generator.get_state(), "converged": self.converged,
+                "data_term": self.data_term.state_dict(), "previous_stage": self.choice.previous}
 
     def _load_field(self, st: dict, weights: Optional[dict] = None) -> None:
         try:
@@ -403,36 +281,18 @@ class NeuralSolver(IterativeSolver):
         if not path.is_file():
             raise FileNotFoundError(f"the previous frame's checkpoint {path} does not exist")
         st = torch.load(path, map_location=self.device, weights_only=False)
-        average = st.get("average")
-        weights = None
-        if average is not None and int(average["n_averaged"]) > 0:
-            weights = {k[len("module."):]: v for k, v in average.items() if k.startswith("module.")}
-        self._load_field(st, weights)
+        self._load_field(st, Optimisation.averaged_weights(st))
 
     def load_state_dict(self, st: dict) -> None:
         self._load_field(st)
         self.data_term.load_state_dict(st.get("data_term", {}))
-        try:
-            self.optimizer.load_state_dict(st["optimizer"])
-        except ValueError as e:
-            raise ValueError("the checkpoint's optimiser state does not fit this solver (made by a nerif before "
-                             f"train.table_decay, or with another encoder): {str(e).splitlines()[0]}") from None
-        self.previous = st.get("previous_stage", st.get("flow_stage"))
-        self.scheduler.load_state_dict(st["scheduler"])
-        self.plan.replan(self.scheduler, self.optimizer, int(st["iteration"]))
-        if self.average is not None:
-            if st.get("average") is not None:
-                self.average.load_state_dict(st["average"])
-            else:  # a checkpoint without an average: it starts again from the next step's weights
-                self.average.n_averaged.zero_()
+        self.optimisation.load_state_dict(st, int(st["iteration"]))
+        self.choice.previous = st.get("previous_stage", st.get("flow_stage"))
         self.generator.set_state(st["generator"].cpu() if self.device.type == "cpu" else st["generator"])
         super().load_state_dict(st)
-        for k in ("samples_seen", "rays_seen", "samples_max", "rays_skipped"):
-            setattr(self, k, st[k])
+        self.counts.load_state_dict(st)
         self.converged = bool(st.get("converged", False))
 
     def timing(self) -> dict:
-        return {**super().timing(), "samples_per_second": self.samples_seen / max(self.train_seconds, 1e-9),
-                "field_evaluations_per_sample": self.renderer.evaluations_per_sample,
-                "samples_per_ray_mean": self.samples_seen / max(self.rays_seen, 1), "samples_per_ray_max": self.samples_max,
-                "rays_skipped_fraction": self.rays_skipped / max(self.rays_seen, 1)}
+        return {**super().timing(), **self.counts.figures(self.train_seconds),
+                "field_evaluations_per_sample": self.renderer.evaluations_per_sample}

@@ -12,11 +12,18 @@ import itertools
 import logging
 import math
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import torch
 
+from nerif.units import declare
+
 log = logging.getLogger(__name__)
+
+declare(chosen_by="(what chose the field kept: held-out images or held-out displacements)",
+        images_from_iteration="iterations", text=("data_term_kept",),
+        containers={"flow_stage": "(the flow's field, each unit by its name here)",
+                    "images_stage": "(the images' field, each unit by its name here)"})
 
 
 @dataclass(frozen=True)
@@ -128,6 +135,44 @@ class StagePlan:
         scheduler._last_lr = [g["lr"] for g in optimizer.param_groups]
         log.info("the cosine learning-rate schedule, planned for %d iterations, now runs to %d: at iteration %d its "
                  "rate is %.3g", planned, self.iterations, t, optimizer.param_groups[0]["lr"])
+
+
+class HeldoutChoice:
+    """The held-out views' choice between the field the stage before the chooser leaves and the one the chooser
+    (:attr:`StagePlan.chooser`, the last stage) ends on.
+
+    Args:
+        plan: the stages. figures: what the held-out views say of the field as it stands now
+            (:meth:`nerif.evaluation.Evaluation.stage_figures`); None where the scene holds no held-out view.
+        physical: the held-out displacements are in px (else sigma).
+    Attributes:
+        previous: where the stage before the chooser has ended, its field's ``weights`` and ``figures``, else None
+            (kept in checkpoints).
+    """
+
+    def __init__(self, plan: StagePlan, figures: Optional[Callable[[], dict]], physical: bool):
+        self.plan, self.figures, self.physical = plan, figures, physical
+        self.previous: Optional[dict] = None
+
+    def after_step(self, iteration: int, estimate: torch.nn.Module) -> None:
+        """Where the stage before the chooser ends at ``iteration``: the field it leaves (``estimate``, the one
+        evaluations use) and what the held-out views say of it."""
+        if self.figures is not None and self.plan.ending(iteration) is self.plan.before_chooser is not None:
+            weights = {k: v.detach().clone() for k, v in estimate.state_dict().items()}
+            self.previous = {"weights": weights, "figures": self.figures()}
+
+    def choose(self) -> tuple[Optional[str], dict]:
+        """At the end of the run: the name of the stage whose field the held-out views keep (:func:`choose`) and what
+        :attr:`nerif.solvers.base.IterativeSolver.report` records of it; (None, {}) where there is nothing to choose
+        (no chooser, no held-out view)."""
+        last, before = self.plan.chooser, self.plan.before_chooser
+        if last is None:
+            return None, {}
+        if self.previous is None:
+            log.info("data_term=images: no held-out view to choose between the %s and the %s fields by; the %s is "
+                     "kept", whose(before.name), whose(last.name), whose(last.name))
+            return None, {}
+        return choose(before, last, self.previous["figures"], self.figures(), self.physical)
 
 
 def choose(before: Stage, last: Stage, old: dict, new: dict, physical: bool) -> tuple[str, dict]:

@@ -16,8 +16,12 @@ import torch
 
 from nerif.masks.backprojection import views_seeing
 from nerif.registry import Registry
+from nerif.units import SIGMA, declare
 
 log = logging.getLogger(__name__)
+
+declare(uncertainty_member_iterations="iterations", uncertainty_members="fields", uncertainty_scale="1 (factor)",
+        uncertainty_spread_median=SIGMA, text=("uncertainty", "uncertainty_scale_from"))
 
 UNCERTAINTY = Registry("uncertainty", package="nerif.solvers")
 

@@ -17,6 +17,9 @@ from nerif.solvers.data_terms import DATA_TERMS, noise_weights
 from nerif.solvers.voxel.cgls import CGLS, REGULARIZERS
 from nerif.solvers.voxel.projector import PROJECTORS, SparseProjector
 from nerif.solvers.voxel.unified import unified_system
+from nerif.units import declare
+declare(rays="rays", unknowns="voxels", relative_residual="1 (|r| / |b|)", lam="1 (weight)",
+        text=("projector", "regularizer"))
 
 
 def boundary_mask(shape, faces) -> np.ndarray:
