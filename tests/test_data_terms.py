@@ -327,3 +327,11 @@ def test_rays_at_pixels_with_a_patch_other_than_two_is_refused_before_any_image_
     with pytest.raises(ValueError, match="render_at=pixels renders one ray a cell of 2 x 2 rays: set data_term.patch=2"):
         DATA_TERMS.build({"name": "images", "render_at": "pixels", "patch": 4})
     assert DATA_TERMS.build({"name": "images", "render_at": "pixels", "patch": 2}).at_pixels
+
+
+def test_an_interpolation_nerif_does_not_have_is_refused_naming_the_setting_and_the_ones_it_has():
+    """The memory estimate before any work reads the references' grid factor only from interpolations it knows: an
+    unknown one is the data term's sentence, when the solver is built, before any image is read."""
+    with pytest.raises(ValueError, match=r"^data_term.interpolation=lanczos: not an interpolation nerif has "
+                                         r"\(bandlimited, bicubic, bilinear, bspline\)$"):
+        DATA_TERMS.build({"name": "images", "interpolation": "lanczos"})

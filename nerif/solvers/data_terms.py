@@ -220,8 +220,8 @@ class ImageTerm(DeflectionTerm):
         if highpass_px is not None and not highpass_px >= 0:
             raise ValueError(f"data_term.highpass_px={highpass_px}: a width in pixels (or null)")
         if interpolation not in INTERPOLATIONS.names():
-            raise ValueError(f"data_term.interpolation must be one of {', '.join(INTERPOLATIONS.names())}, got "
-                             f"'{interpolation}'")
+            raise ValueError(f"data_term.interpolation={interpolation}: not an interpolation nerif has "
+                             f"({', '.join(INTERPOLATIONS.names())})")
         if not (isinstance(patch, int) and patch >= 2):
             raise ValueError(f"data_term.patch={patch}: rays per side of a patch, at least 2")
         self.flow_warmup, self.highpass_px, self.k = float(flow_warmup), highpass_px, patch
