@@ -33,7 +33,7 @@ from ablation import write_report  # noqa: E402
 from nerif.data.capture_images import capture_files, read_exposures  # noqa: E402
 from nerif.data.rig_file import read_rig  # noqa: E402
 from nerif.losses.images import bandpass  # noqa: E402
-from nerif.sensing.imaging import to_uint8  # noqa: E402
+from nerif.export import to_uint8  # noqa: E402
 from nerif.sensing.interpolation import INTERPOLATIONS, interpolation  # noqa: E402
 from nerif.sensing.patterns import PATTERNS  # noqa: E402
 from nerif.sensing.realistic import exposures  # noqa: E402

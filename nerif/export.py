@@ -136,6 +136,11 @@ def write_vti(path: Path, voxel_mm: float, origin_mm, units: Optional[dict] = No
     return atomic_write(path, write)
 
 
+def to_uint8(image) -> np.ndarray:
+    """Intensities in [0, 1] -> 8-bit (rounded, clipped), as a camera saves them."""
+    return np.clip(np.rint(np.asarray(image) * 255.0), 0, 255).astype(np.uint8)
+
+
 def write_png(path: Path, image: np.ndarray) -> Path:
     """An 8- or 16-bit image (H, W) or (H, W, C) as a PNG, atomically."""
     import cv2

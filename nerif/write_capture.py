@@ -29,7 +29,7 @@ from nerif.sequence import frames_of
 from nerif.data.rig_file import CALIBRATED_VERSION, read_rig, write_rig
 from nerif.data.scene import Scene
 from nerif.geometry import Camera
-from nerif.export import atomic_write, write_npz, write_png
+from nerif.export import atomic_write, to_uint8, write_npz, write_png
 from nerif.units import VOLUMES
 from nerif.sensing.optics import probe_distance_mm
 
@@ -51,9 +51,9 @@ def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Opt
     scenes = [scenes] if isinstance(scenes, Scene) else scenes
     listed, first = [], None
     for k, scene in enumerate(scenes):
-        if scene.sensing is None:
+        if scene.images is None:
             raise ValueError("writing a capture needs images: use data.sensing=realistic")
-        dist = scene.sensing.distorted
+        dist = [to_uint8(im.distorted.cpu().numpy()) for im in scene.images]  # as the camera saved them
         folder = f"frame_{k:04d}/" if series else ""
         write_truth(scene, root / f"{folder}{TRUTH_FILE}")
         listed.append([f"{folder}distorted_{v:02d}.png" for v in range(len(dist))])
@@ -61,11 +61,11 @@ def write_capture(scenes, root: Path, heldout: Optional[list] = None, times: Opt
             write_png(root / name, dist[v])
         if first is None:
             first = scene
-            for v, ref in enumerate(scene.sensing.reference):
-                write_png(root / f"reference_{v:02d}.png", ref)
+            for v, im in enumerate(scene.images):
+                write_png(root / f"reference_{v:02d}.png", to_uint8(im.reference.cpu().numpy()))
     if first is None or (series and len(listed) != len(times)) or (not series and len(listed) != 1):
         raise ValueError(f"{len(listed)} scene(s) for {len(times) if series else 1} frame(s)")
-    n, H, W = first.sensing.distorted.shape
+    n, (H, W) = first.n_views, first.images[0].reference.shape
     if any(c.distortion is not None or c.centre_px is not None or c.aspect != 1.0 for c in first.cameras):
         if series:
             raise ValueError("a time series through a calibrated rig is not written yet: write one state at a time")
@@ -122,7 +122,7 @@ def write_calibration(cameras: list[Camera], images: list[str], references: list
 def write_calibrated(scene: Scene, root: Path, images: list[str], heldout: Optional[list] = None) -> Path:
     """The rig file of calibrated cameras (version 3) and its calibration file, for a scene of calibrated cameras whose images are
     written (:func:`write_capture`)."""
-    n, H, W = scene.sensing.distorted.shape
+    n, W = scene.n_views, scene.images[0].reference.shape[1]
     cams = [c.full_sensor for c in scene.cameras]
     cams = [c.binned(c.width // W) if c.width != W else c for c in cams]  # the images' grid
     refs = [f"reference_{v:02d}.png" for v in range(n)]

@@ -1,5 +1,4 @@
 """Figures: the slices show the right planes and the error, and they are written as PNG images."""
-from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -80,9 +79,8 @@ def test_curves_heldout_and_sensing_figures_render(tmp_path):
     assert "grey: no ray" in fig._suptitle.get_text()
     u_true = np.zeros((2, 8, 6, 2))
     u_true[1, 6, 2] = 1.0
-    rec = SimpleNamespace(reference=np.zeros((2, 64, 48), np.uint8), distorted=np.zeros((2, 64, 48), np.uint8),
-                          u_true=u_true, u_est=np.zeros((2, 8, 6, 2)))
-    fig = sensing_figure(rec, 1, crop_px=16)
+    fig = sensing_figure(np.zeros((64, 48), np.uint8), np.zeros((64, 48), np.uint8), u_true[1], np.zeros((8, 6, 2)),
+                         crop_px=16)
     assert fig.axes[0].images[0].get_array().shape == (16, 16)
     assert cv2.imread(str(save_figure(fig, tmp_path / "s.png"))) is not None
 

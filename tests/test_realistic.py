@@ -19,9 +19,9 @@ def test_realistic_sensing_is_seeded_and_records_what_it_saw():
     c = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], seed=1)))
     torch.testing.assert_close(a.eps, b.eps)
     assert not torch.equal(a.eps, c.eps)
-    rec = a.sensing
-    assert rec.reference.shape == (2, 160, 90) and rec.reference.dtype == np.uint8
-    assert rec.u_true.shape == rec.u_est.shape == (2, 32, 18, 2)
+    rec = a.sensing  # the chain's truth; what it measured is in the views, as a capture's
+    assert tuple(a.images[0].reference.shape) == (160, 90) and len(a.images) == 2
+    assert rec.u_true.shape == (2, 32, 18, 2) and a.views[0].measured_px.shape == (32, 18, 2)
     assert 0 < float(rec.displacement_rmse_px) < 0.1
     # the observed deflections are the measurable part of the ideal ones, seen through a blurred, noisy flow
     # estimate: close, not equal; and perpendicular to their rays, which the scene declares
@@ -44,7 +44,7 @@ def test_the_flames_light_and_a_gain_drift_change_only_the_distorted_image_as_se
     lit = DATASETS.build(dict(REALISTIC, sensor=dict(quiet, luminosity=0.3)))
     drift = DATASETS.build(dict(REALISTIC, sensor=dict(quiet, gain_drift=0.1)))
     for s in (lit, drift):
-        np.testing.assert_array_equal(s.sensing.reference, plain.sensing.reference)
+        torch.testing.assert_close(s.images[0].reference, plain.images[0].reference, rtol=0, atol=0)
     ref = plain.images[0].reference.double()
     glow = (lit.images[0].distorted - plain.images[0].distorted).double()
     assert abs(float(glow.max()) - 0.3 * float(ref.mean())) < 2.5 / 255  # 8-bit images
@@ -100,10 +100,10 @@ def test_an_opaque_burner_is_dark_in_both_exposures_found_occluded_and_left_unkn
 
     scene = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], burner_radius_mm=6.0)))
     tube = burner_pixels(RIGS.build(REALISTIC["rig"])[0].unbinned(40).binned(8), 6.0, -16.0)  # the images' grid
-    for images in (scene.sensing.reference[0], scene.sensing.distorted[0]):
+    for images in (255 * scene.images[0].reference.numpy(), 255 * scene.images[0].distorted.numpy()):
         assert abs(float(np.median(images[tube])) - 255 * DARK) < 3  # dark
         assert float(images[tube].std()) < 5 < 30 < float(images[~tube].std())  # and without the pattern's texture
-    found, true = scene.sensing.found["occluded"], scene.sensing.occluded_true
+    found, true = np.array([f.occluded for f in scene.findings]), scene.sensing.occluded_true
     assert np.all(found >= 0.9 * true) and np.all(found < true + 0.1), (found, true)
     hidden = (torch.nn.functional.avg_pool2d(torch.as_tensor(tube, dtype=torch.float32)[None], 5)[0] > 0).numpy()
     ideal = DATASETS.build(dict(REALISTIC, sensing="ideal"))
@@ -118,10 +118,10 @@ def test_light_brighter_than_full_scale_clips_and_the_stage_counts_it():
     clips the distorted image. Where the pattern's dark dots still show through, the texture is there: counted as
     clipped, not left out (issue 49); where the light clips them too, the stage leaves those pixels out."""
     bright = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], luminosity=20.0)))
-    assert (bright.sensing.distorted == 255).any() and (bright.sensing.found["clipped"] > 0.04).all()
-    assert (bright.sensing.found["saturated"] < 0.5 * bright.sensing.found["clipped"]).all()
+    assert (bright.images[0].distorted == 1.0).any() and all(f.clipped > 0.04 for f in bright.findings)
+    assert all(f.saturated < 0.5 * f.clipped for f in bright.findings)
     blinding = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], luminosity=200.0)))
-    assert (blinding.sensing.found["saturated"] > 0.05).all()
+    assert all(f.saturated > 0.05 for f in blinding.findings)
 
 
 def test_pixels_that_integrate_the_background_measure_as_well_and_a_bad_count_is_refused():
@@ -129,7 +129,7 @@ def test_pixels_that_integrate_the_background_measure_as_well_and_a_bad_count_is
     pattern at their displaced centres (1): another image pair, measured as well, the same rays."""
     integrated = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], pixel_samples=4)))
     centres = DATASETS.build(dict(REALISTIC, sensor=dict(REALISTIC["sensor"], pixel_samples=1)))
-    assert not np.array_equal(integrated.sensing.distorted, centres.sensing.distorted)
+    assert not torch.equal(integrated.images[0].distorted, centres.images[0].distorted)
     for s in (integrated, centres):
         assert 0 < float(s.sensing.displacement_rmse_px) < 0.1
     for bad in (0, 2.5):

@@ -19,11 +19,10 @@ from nerif.data.scene import (DATASETS, Scene, ViewImages, keep_rays, kept_pixel
 from nerif.geometry import RIGS, rays_in_box
 from nerif.memory import probe_grid
 from nerif.physics import Ambient
-from nerif.sensing.findings import Findings
 from nerif.sensing.models import SENSING
-from nerif.sensing.record import SensingRecord
+from nerif.sensing.record import MeasuredViews, SensingRecord
 
-_SCENE_CACHE_VERSION = 6
+_SCENE_CACHE_VERSION = 7  # 7: the chain's measured views apart from its truth
 
 
 def supersampled(phantom: dict, factor: int):
@@ -124,19 +123,22 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
     def observe() -> dict:
         fine = supersampled(phantom, render_supersample) if render_supersample > 1 else ph
         delta = torch.as_tensor(fine.delta, dtype=torch.float32, device=device)
-        eps, record = SENSING.build({"name": sensing, **sensor}, delta=delta, box=fine.box, cameras=cameras, dirs=dirs,
-                                    pixel=pixel, view_start=view_start, step_mm=render_step_mm,
-                                    rig_binning=cameras[0].binning, cache_dir=cache_dir)
-        rendered = {"eps": eps.cpu().numpy()} if eps is not None else {}
-        return {**rendered, **{f"sensing/{k}": v for k, v in (record.arrays() if record else {}).items()}}
+        observed, record = SENSING.build({"name": sensing, **sensor}, delta=delta, box=fine.box, cameras=cameras,
+                                         dirs=dirs, pixel=pixel, view_start=view_start, step_mm=render_step_mm,
+                                         rig_binning=cameras[0].binning, cache_dir=cache_dir)
+        seen = ({f"measured/{k}": v for k, v in observed.arrays().items()} if isinstance(observed, MeasuredViews)
+                else {"eps": observed.cpu().numpy()})
+        return {**seen, **{f"sensing/{k}": v for k, v in (record.arrays() if record else {}).items()}}
 
     payload = {"v": _SCENE_CACHE_VERSION, "truth": content_digest(ph.T), "phantom": phantom, "rig": rig, "step": render_step_mm,
                "supersample": render_supersample, "sensing": sensing, "sensor": sensor}
     arrays = cached_arrays(cache_dir, "synthetic", payload, observe)
-    sensed = {k[len("sensing/"):]: v for k, v in arrays.items() if k.startswith("sensing/")}
+    sensed, measured = ({k[len(p):]: v for k, v in arrays.items() if k.startswith(p)}
+                        for p in ("sensing/", "measured/"))
     record = SensingRecord.from_arrays(sensed) if sensed else None
     if "eps" not in arrays:  # measured from images: built as a capture is, from each view's displacements
-        scene = replace(measured_scene(ph, ambient, cameras, (origins, dirs, pixel, view_start), record, sensor, device),
+        scene = replace(measured_scene(ph, ambient, cameras, (origins, dirs, pixel, view_start),
+                                       MeasuredViews.from_arrays(measured), record, sensor, device),
                         cache_dir=cache_dir)
     else:
         scene = _rendered_scene(ph, ambient, cameras, (origins, dirs, pixel, view_start),
@@ -148,19 +150,18 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
     return scene
 
 
-def measured_scene(ph, ambient: Ambient, cameras: list, rays: tuple, record: SensingRecord, sensor: dict,
-                   device) -> Scene:
-    """The scene of a realistic chain's ``record``: each view's measured displacements, valid pixels, images and
-    findings, through :func:`nerif.data.scene.scene_from_displacements` (as a capture's)."""
+def measured_scene(ph, ambient: Ambient, cameras: list, rays: tuple, measured: MeasuredViews,
+                   record: SensingRecord, sensor: dict, device) -> Scene:
+    """The scene of a realistic chain's views (``measured``): each view's measured displacements, valid pixels,
+    images and findings, through :func:`nerif.data.scene.scene_from_displacements` (as a capture's), with the chain's
+    truth (``record``)."""
     binning = int(sensor.get("image_binning", 1))
-    images = [ViewImages(torch.as_tensor(record.reference[v] / 255.0, dtype=torch.float32, device=device),
-                         torch.as_tensor(record.distorted[v] / 255.0, dtype=torch.float32, device=device),
+    images = [ViewImages(torch.as_tensor(measured.reference[v] / 255.0, dtype=torch.float32, device=device),
+                         torch.as_tensor(measured.distorted[v] / 255.0, dtype=torch.float32, device=device),
                          cam.full_sensor.binned(binning)) for v, cam in enumerate(cameras)]
-    per_view = {k: v.tolist() for k, v in record.found.items()}
-    found = [Findings.read({k: x[v] for k, x in per_view.items()}) for v in range(len(cameras))]
-    return scene_from_displacements(ph.box, ambient, cameras, list(record.displacement_px), list(record.valid),
-                                    device=device, rays=rays, images=images, found=found, truth_T=ph.T, sensing=record,
-                                    left_out=list(record.left_out))
+    return scene_from_displacements(ph.box, ambient, cameras, list(measured.displacement_px), list(measured.valid),
+                                    device=device, rays=rays, images=images, found=measured.findings(), truth_T=ph.T,
+                                    sensing=record, left_out=list(measured.left_out))
 
 
 def with_noise(eps: torch.Tensor, dirs: Optional[torch.Tensor], fraction: float, seed: int) -> torch.Tensor:

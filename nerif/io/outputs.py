@@ -17,7 +17,7 @@ import torch
 
 import nerif.io.plots as plots
 from nerif.cache import cached_arrays, content_digest, source_digest
-from nerif.export import atomic_write, write_npz, write_png, write_vti
+from nerif.export import atomic_write, to_uint8, write_npz, write_png, write_vti
 from nerif.metrics import temperature_figures, uncertainty_scores
 from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
                              profiles_figure, save_figure, sensing_figure, slice_figure)
@@ -80,11 +80,14 @@ def write_sensing(scene, out_dir: Path, causes: tuple = (), cache_dir=None) -> N
     rec = scene.sensing
     if rec is None:
         return
-    for v, cam in enumerate(scene.cameras):
-        write_png(out_dir / "sensing" / f"reference_view{v:02d}.png", rec.reference[v])
-        write_png(out_dir / "sensing" / f"distorted_view{v:02d}.png", rec.distorted[v])
-        save_figure(sensing_figure(rec, v, title=f"{cam.name}: displacement RMSE of the flow "
-                                   f"{rec.displacement_rmse_px:.3f} px (all views)"),
+    for v, (view, u_true) in enumerate(zip(scene.views, rec.u_true)):
+        reference, distorted = (to_uint8(im.cpu().numpy()) for im in (view.images.reference, view.images.distorted))
+        write_png(out_dir / "sensing" / f"reference_view{v:02d}.png", reference)
+        write_png(out_dir / "sensing" / f"distorted_view{v:02d}.png", distorted)
+        u_est = view.measured_px / np.float32(view.images.camera.binning)  # px of the images' grid, as u_true
+        save_figure(sensing_figure(reference, distorted, u_true, u_est,
+                                   title=f"{view.camera.name}: displacement RMSE of the flow "
+                                         f"{rec.displacement_rmse_px:.3f} px (all views)"),
                     out_dir / "sensing" / f"view{v:02d}.png")
 
 

@@ -294,13 +294,13 @@ def masks_figure(values: list, masks: list, names: list, unit: str, block_px: in
     return fig
 
 
-def sensing_figure(record, view: int, crop_px: int = 160, title: str = ""):
-    """One view of realistic sensing (``record``: :class:`nerif.sensing.record.SensingRecord`): reference and
-    distorted image crops around the largest displacement, true and estimated displacement magnitude [image px] on
-    the training grid, and their difference."""
-    ut, ue = record.u_true[view], record.u_est[view]
+def sensing_figure(reference: np.ndarray, distorted: np.ndarray, ut: np.ndarray, ue: np.ndarray, crop_px: int = 160,
+                   title: str = ""):
+    """One view of realistic sensing: its 8-bit ``reference`` and ``distorted`` images (H, W) cropped around the
+    largest displacement, the true (``ut``) and estimated (``ue``) displacement magnitude, (h, w, 2) each [image px]
+    on the training grid, and their difference."""
     h, w = ut.shape[:2]
-    H, W = record.reference[view].shape
+    H, W = reference.shape
     r, c = np.unravel_index(np.argmax(np.linalg.norm(ut, axis=-1)), (h, w))
     rr = int(np.clip((r + 0.5) * H / h - crop_px // 2, 0, max(H - crop_px, 0)))
     cc = int(np.clip((c + 0.5) * W / w - crop_px // 2, 0, max(W - crop_px, 0)))
@@ -308,12 +308,12 @@ def sensing_figure(record, view: int, crop_px: int = 160, title: str = ""):
     mag_t, mag_e = np.linalg.norm(ut, axis=-1), np.linalg.norm(ue, axis=-1)
     diff = np.linalg.norm(ue - ut, axis=-1)
     vmax = float(np.nanmax(mag_t)) or 1.0
-    panels = [("reference (crop)", record.reference[view][crop], dict(cmap="gray", vmin=0, vmax=255)),
-              ("distorted (crop)", record.distorted[view][crop], dict(cmap="gray", vmin=0, vmax=255)),
+    panels = [("reference (crop)", reference[crop], dict(cmap="gray", vmin=0, vmax=255)),
+              ("distorted (crop)", distorted[crop], dict(cmap="gray", vmin=0, vmax=255)),
               ("|u| true [px]", mag_t, dict(cmap="viridis", vmin=0, vmax=vmax)),
               ("|u| estimated [px]", mag_e, dict(cmap="viridis", vmin=0, vmax=vmax)),
               ("|u est - u true| [px]", diff, dict(cmap="magma", vmin=0, vmax=float(np.nanmax(diff)) or 1.0))]
-    return image_panels(panels, title or f"view {view}")
+    return image_panels(panels, title or "realistic sensing")
 
 
 # the colours of the causes a pixel was left out for (nerif.sensing.measurement.CAUSES after "kept")

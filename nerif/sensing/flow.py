@@ -14,7 +14,7 @@ import numpy as np
 
 from nerif.registry import Registry
 from nerif.sensing.flame_light import LIGHT_SEEN, light_structure
-from nerif.sensing.imaging import to_uint8
+from nerif.export import to_uint8
 from nerif.sensing.texture import AUTO_WIDTH_RANGE_PX, texture_width
 
 FLOW = Registry("optical flow", package="nerif.sensing")

@@ -13,11 +13,6 @@ import numpy as np
 import torch
 
 
-def to_uint8(image) -> "np.ndarray":
-    """Intensities in [0, 1] -> 8-bit (rounded, clipped), as a camera saves them."""
-    return np.clip(np.rint(np.asarray(image) * 255.0), 0, 255).astype(np.uint8)
-
-
 def warp(image: torch.Tensor, u: torch.Tensor, mode: str = "bicubic") -> torch.Tensor:
     """The background seen through displacements ``u``: ``out(x) = image(x + u(x))`` (differentiable).
 

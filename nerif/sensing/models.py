@@ -1,10 +1,11 @@
 """Sensing models: what a rig measures of a synthetic field (``data.sensing``).
 
 Every model is ``fn(delta, box, cameras, dirs, pixel, view_start, step_mm, rig_binning, cache_dir=None, **sensor)
--> (eps (N, 3) [rad], record or None)``: the observed deflections of the training rays (see
-:class:`nerif.data.scene.Scene`) of a field ``delta`` (nx, ny, nz) on ``box``, and what the sensing saw (images,
-displacements) for figures. Registered in :data:`SENSING`: ``ideal`` and ``perpendicular`` here, ``realistic``
-in :mod:`nerif.sensing.realistic`.
+-> (observed, record or None)``: what the rig observes of a field ``delta`` (nx, ny, nz) on ``box``, the training
+rays' deflections (N, 3) [rad] (see :class:`nerif.data.scene.Scene`), or where the model measures them from images
+its views' measurements (:class:`nerif.sensing.record.MeasuredViews`); and what only the model knows (its truth,
+:class:`nerif.sensing.record.SensingRecord`) for figures and scores. Registered in :data:`SENSING`: ``ideal`` and
+``perpendicular`` here, ``realistic`` in :mod:`nerif.sensing.realistic`.
 """
 from __future__ import annotations
 

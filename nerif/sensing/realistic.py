@@ -32,11 +32,12 @@ from nerif.sensing.displacement import deflection_to_displacement
 from nerif.sensing.emission import flame_light
 from nerif.sensing.flow import FLOW, check_flow
 from nerif.sensing.measurement import MEASUREMENT
-from nerif.sensing.imaging import add_noise, diffraction_blur, expose, resample, to_uint8, warp
+from nerif.export import to_uint8
+from nerif.sensing.imaging import add_noise, diffraction_blur, expose, resample, warp
 from nerif.sensing.models import SENSING
 from nerif.sensing.optics import aperture_points, aperture_rays, circle_of_confusion
 from nerif.sensing.patterns import PATTERNS
-from nerif.sensing.record import SensingRecord
+from nerif.sensing.record import chain_records
 
 log = logging.getLogger(__name__)
 
@@ -189,16 +190,16 @@ class Sensor:
 
 
 def _view_record(x: dict, m, cam: Camera, pixel: torch.Tensor, image_binning: int) -> tuple[dict, np.ndarray]:
-    """One view's fields of the :class:`SensingRecord` from what the chain made (``x``, :meth:`Sensor.expose`) and
-    measured (``m``, a :class:`nerif.sensing.measurement.ViewMeasurement`) on the ray grid of ``cam``, and the
-    squared errors (n, 2) of the measured displacements at the training rays' ``pixel`` [px^2 of the images]."""
+    """One view's fields of the chain's records (:func:`nerif.sensing.record.chain_records`) from what the chain
+    made (``x``, :meth:`Sensor.expose`) and measured (``m``, a :class:`nerif.sensing.measurement.ViewMeasurement`)
+    on the ray grid of ``cam``, and the squared errors (n, 2) of the measured displacements at the training rays' ``pixel`` [px^2 of the images]."""
     pix = pixel.cpu().numpy()
     u_true = resample(x["u_ren"], cam.height, cam.width)
     u_est = m.displacement / np.float32(image_binning)  # the figures' unit: px of the images' grid
     err = (u_est.reshape(-1, 2)[pix] - u_true.reshape(-1, 2)[pix]) ** 2
     return dict(displacement_px=m.displacement, valid=m.valid, left_out=m.left_out,
                 reference=to_uint8(x["reference"]), distorted=to_uint8(x["distorted"]),
-                u_true=u_true.astype(np.float32), u_est=u_est.astype(np.float32),
+                u_true=u_true.astype(np.float32),
                 circle_of_confusion_px=np.float64(x["coc_px"]), shake_true_px=x["shake"],
                 occluded_true=x["occluded"], found=m.found.report()), err[np.isfinite(err).all(-1)]
 
@@ -238,9 +239,10 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         cache_dir: where the aperture renderings (the costly part) are cached, keyed by the field and the
             optics, so that sweeps over noise, pattern or flow reuse them.
     Returns:
-        None (the observations are the measured displacements, which the scene turns into deflections as it does a
-        capture's: :func:`nerif.data.scene.scene_from_displacements`) and what the chain saw and measured in each
-        view (:class:`nerif.sensing.record.SensingRecord`).
+        what the views recorded and measured (:class:`nerif.sensing.record.MeasuredViews`: the observations are the
+        measured displacements, which the scene turns into deflections as it does a capture's,
+        :func:`nerif.data.scene.scene_from_displacements`) and what only the chain knows
+        (:class:`nerif.sensing.record.SensingRecord`: its truth).
     """
     sensor = Sensor(aperture_rays, wavelength_um, noise_variance, image_binning, render_binning or rig_binning,
                     seed, luminosity, gain_drift, gain_ramp, shake_px, burner_radius_mm, burner_top_mm, pixel_samples)
@@ -262,4 +264,4 @@ def realistic(delta: torch.Tensor, box: ProbeBox, cameras: list[Camera], dirs: t
         sq_err, count = sq_err + float(err.sum()), count + len(err)
         log.info("%s: true displacement up to %.2f px, circle of confusion %.1f px", cam.name,
                  float(np.abs(x["u_ren"]).max()), x["coc_px"])
-    return None, SensingRecord.of_views(per_view, np.sqrt(sq_err / max(count, 1)))
+    return chain_records(per_view, np.sqrt(sq_err / max(count, 1)))
