@@ -120,8 +120,8 @@ def write_calibration(cameras: list[Camera], images: list[str], references: list
 
 
 def write_calibrated(scene: Scene, root: Path, images: list[str], heldout: Optional[list] = None) -> Path:
-    """The rig file of calibrated cameras (version 3) and its calibration file, for a scene of calibrated cameras whose images are
-    written (:func:`write_capture`)."""
+    """The rig file of calibrated cameras (version 3) and its calibration file, for a scene of calibrated cameras
+    whose images are written (:func:`write_capture`)."""
     n, W = scene.n_views, scene.images[0].reference.shape[1]
     cams = [c.full_sensor for c in scene.cameras]
     cams = [c.binned(c.width // W) if c.width != W else c for c in cams]  # the images' grid

@@ -6,6 +6,7 @@ from nerif.configs import group
 from nerif.data import DATASETS
 from nerif.metrics import uncertainty_scores
 from nerif.solvers.uncertainty import UNCERTAINTY
+from nerif.units import unit_of
 from tests.helpers import solver, tiny_config, trained_on_half_the_box
 
 
@@ -29,6 +30,7 @@ def test_where_no_ray_reaches_the_field_is_less_certain_and_the_result_is_unchan
     assert np.median(std[seen == 0]) > 2 * np.median(std[seen == seen.max()])
     report = out["report"]
     assert report["uncertainty"] == "laplace" and report["uncertainty_scale_from"] == "held-out views"
+    assert not [k for k in report if unit_of(k) is None]  # every figure it reports has its unit in metrics.json
     truth = scene.ambient.sigma_from_temperature(scene.truth_T)
     assert uncertainty_scores(before, std, truth)["coverage_2sigma"] > 0.5
 

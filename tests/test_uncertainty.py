@@ -5,6 +5,7 @@ import torch
 
 from nerif.metrics import ause, uncertainty_scores
 from nerif.solvers.uncertainty import UNCERTAINTY, calibration, left_out_views
+from nerif.units import unit_of
 
 
 def test_members_leave_out_different_views_all_round():
@@ -131,6 +132,7 @@ def test_a_voxel_no_ray_reaches_is_less_certain_than_one_every_view_sees_and_the
     assert (seen == 0).any() and (seen == seen.max()).any()
     assert np.median(std[seen == 0]) > 10 * np.median(std[seen == seen.max()])
     assert out["report"]["uncertainty_scale_from"] == "held-out views"
+    assert not [k for k in out["report"] if unit_of(k) is None]  # every figure it reports has its unit
 
 
 def test_a_run_without_uncertainty_writes_none(tmp_path):

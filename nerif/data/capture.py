@@ -219,6 +219,7 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
                                      [m.valid for m in measured], device=device, rays=rays, sigma_prior=prior,
                                      sigma_prior_from=f"temperature_range_K {list(rig.temperature_range_K or ())} in "
                                                       f"{rig.path}",
-                                     images=views, truth_T=truth_T, found=[m.found for m in measured], cache_dir=cache_dir,
+                                     images=views, truth_T=truth_T, found=[m.found for m in measured],
+                                     cache_dir=cache_dir,
                                      left_out=causes if all(c is not None for c in causes) else None)
     return screened(scene, held)

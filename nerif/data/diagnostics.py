@@ -131,7 +131,7 @@ def bad_views(scene: Scene) -> dict[int, str]:
         for v in rest:
             if evidence[v] > SIGN:
                 why[v] = (f"its deflections point the way the other views' do not (hot evidence {evidence[v]:+.2f}, "
-                          "the others below -0.2): its reference and distorted images swapped?")
+                          f"the others below -{SIGN:g}): its reference and distorted images swapped?")
     return why
 
 
@@ -220,7 +220,7 @@ def view_span_deg(cameras: list[Camera]) -> float:
 
 
 def check_sign(scene, prior) -> list[str]:
-    """One sentence where the deflections show gas colder than ambient (:func:`nerif.data.scene.hot_evidence`
+    """One sentence where the deflections show gas colder than ambient (:func:`hot_evidence`
     above :data:`SIGN`). Where most views agree on it, a flame is hotter, so the reference and distorted images look
     swapped (or the deflections' sign reversed); where the views disagree, the measurement of those views is what
     fails (a flow thrown off by the flame's own light, a shaking camera, an occluder), and the sentence names them.
@@ -258,8 +258,8 @@ def ill_posed(scene) -> list[str]:
     n = view_directions(scene.cameras)
     if n < MIN_DIRECTIONS:
         msg = (f"ill-posed: the {scene.n_views} training view(s) look along only {n} distinct direction(s); a 3-D "
-               f"field needs at least {MIN_DIRECTIONS}, and the reconstruction is not to be trusted away from what they "
-               "see")
+               f"field needs at least {MIN_DIRECTIONS}, and the reconstruction is not to be trusted away from what "
+               "they see")
     elif (span := view_span_deg(scene.cameras)) < SPAN_DEG:
         msg = (f"ill-posed: the {scene.n_views} training views span only {span:.1f} degrees of viewing directions; "
                f"tomography needs a wide spread ({SPAN_DEG:g} degrees at least), and the reconstruction is not to be "

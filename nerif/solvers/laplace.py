@@ -16,8 +16,11 @@ import time
 import torch
 
 from nerif.solvers.uncertainty import UNCERTAINTY, calibrated_spread, heldout_fit
+from nerif.units import declare
 
 log = logging.getLogger(__name__)
+
+declare(uncertainty_samples="fields", uncertainty_curvature_batches="batches")
 
 
 @UNCERTAINTY.register("laplace")

@@ -208,7 +208,7 @@ class NeuralSolver(IterativeSolver):
                                   "(try a lower train.lr)")
         self.optimisation.after_step(self.iteration + 1)
         self._timed(time.perf_counter() - t0)
-        self.choice.after_step(self.iteration, self.estimate)
+        self.choice.after_step(self.iteration, lambda: self.estimate)
         self.counts.add(len(samples.positions), samples.n_rays, int(stats[-2]), int(stats[-1]))
         out.update(lr=self.optimisation.lr,
                    samples_per_ray=len(samples.positions) / max(samples.n_rays, 1),

@@ -131,7 +131,8 @@ class StagePlan:
         t = scheduler.last_epoch
         scheduler.T_max = length
         for g, base in zip(optimizer.param_groups, scheduler.base_lrs):
-            g["lr"] = scheduler.eta_min + (base - scheduler.eta_min) * (1 + math.cos(math.pi * min(t, length) / length)) / 2
+            c = math.cos(math.pi * min(t, length) / length)
+            g["lr"] = scheduler.eta_min + (base - scheduler.eta_min) * (1 + c) / 2
         scheduler._last_lr = [g["lr"] for g in optimizer.param_groups]
         log.info("the cosine learning-rate schedule, planned for %d iterations, now runs to %d: at iteration %d its "
                  "rate is %.3g", planned, self.iterations, t, optimizer.param_groups[0]["lr"])
@@ -154,11 +155,12 @@ class HeldoutChoice:
         self.plan, self.figures, self.physical = plan, figures, physical
         self.previous: Optional[dict] = None
 
-    def after_step(self, iteration: int, estimate: torch.nn.Module) -> None:
-        """Where the stage before the chooser ends at ``iteration``: the field it leaves (``estimate``, the one
-        evaluations use) and what the held-out views say of it."""
+    def after_step(self, iteration: int, estimate: Callable[[], torch.nn.Module]) -> None:
+        """Where the stage before the chooser ends at ``iteration``: the field it leaves (``estimate()``, the one
+        evaluations use; asked for only then, as it may wait for the device) and what the held-out views say of
+        it."""
         if self.figures is not None and self.plan.ending(iteration) is self.plan.before_chooser is not None:
-            weights = {k: v.detach().clone() for k, v in estimate.state_dict().items()}
+            weights = {k: v.detach().clone() for k, v in estimate().state_dict().items()}
             self.previous = {"weights": weights, "figures": self.figures()}
 
     def choose(self) -> tuple[Optional[str], dict]:
