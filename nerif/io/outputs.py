@@ -174,14 +174,19 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float,
                               "rad" if amb.temperature_known else "sigma"), out_dir / "curves.png")
     final = dict(solver.history[-1]) if solver.history else solver.evaluate()
     final.pop("iteration", None)
+    final.update(solver.evaluation.view_misfits(solver.predict(*solver.evaluation.train_rays())))
+    contradicted = solver.evaluation.contradicted(final)
+    if contradicted:
+        log.warning("%s", contradicted)
     failed = ""
     if scene.heldout is not None:
         final.update(write_heldout(solver, out_dir))  # every held-out ray, not the evaluation subset
         final["history_note"] = ("history follows the errors on a fixed subset of rays (metrics.eval_rays_per_view "
                                  "per view); the final heldout_* figures use every held-out ray")
         failed = solver.evaluation.failed(final)
-        if failed:
-            log.warning("%s", failed)
+        for said in (failed, "" if failed else solver.evaluation.unexplained(final)):
+            if said:
+                log.warning("%s", said)
     if not amb.temperature_known:
         final["deflection_unit"] = "sigma (the data are deflections of sigma; no temperature is inferred)"
     final.update(solver.timing())

@@ -20,6 +20,7 @@ from nerif.renderers import SAMPLERS, DeflectionRenderer
 from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_faces
 from nerif.solvers.batches import RayBatcher
 from nerif.solvers.data_terms import DATA_TERMS
+from nerif.solvers.poses import POSES
 from nerif.solvers.stages import HeldoutChoice, Stage, StagePlan
 from nerif.solvers.training import Optimisation, SampleCounts, Training, allocations, warm_start
 
@@ -51,7 +52,8 @@ class NeuralSolver(IterativeSolver):
     trains_members = True
 
     def __init__(self, *, encoder: Mapping, field: Mapping, grad: Mapping, sampler: Mapping, loss: Mapping,
-                 train: Mapping, metrics: Mapping, seed: int, label: str, data_term: Optional[Mapping] = None):
+                 train: Mapping, metrics: Mapping, seed: int, label: str, data_term: Optional[Mapping] = None,
+                 poses: Optional[Mapping] = None):
         super().__init__(iterations=train["iterations"], eval_every=train["eval_every"], metrics=metrics, seed=seed,
                          label=label)
         self.training = Training.read(train)
@@ -63,6 +65,7 @@ class NeuralSolver(IterativeSolver):
         self.encoder = ENCODERS.build(encoder)
         self.sampler = SAMPLERS.build(sampler)
         self.data_term = DATA_TERMS.build(data_term or {"name": "flow"})
+        self.poses = POSES.build(poses or {"name": "given"})
         self.hidden, self.prior = tuple(field["hidden"]), field["prior"]
         self.loss_cfg = dict(loss)
         self.labels.update(encoder=encoder["name"], grad=grad["name"])
@@ -90,6 +93,7 @@ class NeuralSolver(IterativeSolver):
         self.data_term.setup(scene, self.batches, self.iterations, masks)
         self.plan = StagePlan(self.data_term.stages())
         self.iterations = self.plan.iterations
+        self.poses.setup(scene, self.iterations)
         figures = (lambda: self.evaluation.stage_figures(self.predict, self.reconstruction, self.data_term))
         self.choice = HeldoutChoice(self.plan, figures if scene.heldout is not None else None,
                                     self.evaluation.physical)
@@ -138,7 +142,21 @@ class NeuralSolver(IterativeSolver):
             last = self.evaluate()
             if kwargs.get("checkpoint") is not None and kwargs.get("checkpoint_at_end", True):
                 self.checkpoint(kwargs["checkpoint"])
+        self.report_poses()
         return last
+
+    def report_poses(self) -> None:
+        """The refined poses (:meth:`RefinedPoses.report`) into :attr:`report` and the log, the warning of one at its
+        bound too; nothing where the poses are the rig's."""
+        found = self.poses.report()
+        if not found:
+            return
+        self.report.update(found)
+        log.info("refined poses: turns about the vertical axis %s deg; largest rotation %.2f deg, translation %.2f mm",
+                 ", ".join(f"{a:+.2f}" for a in found["pose_angle_deg"]), found["pose_rotation_max_deg"],
+                 found["pose_translation_max_mm"])
+        if "pose_warning" in found:
+            log.warning(found["pose_warning"])
 
     def member(self, views: list[int], iterations: int, seed: int, lr_factor: float,
                perturb: float = 0.0) -> "NeuralSolver":
@@ -181,8 +199,9 @@ class NeuralSolver(IterativeSolver):
             self.sampler.update(self.scene.box, self.occupancy_value, self.iteration, self.generator)
         stage = self.plan.at(self.iteration)
         batch = stage.term.draw(self.iteration)
-        samples = self.sampler(self.scene.box, batch.origins, batch.dirs, self.generator)
-        eps = self.renderer.train(self.field, samples, batch.dirs)
+        origins, dirs, turn = self.poses.rays(batch.origins, batch.dirs)
+        samples = self.sampler(self.scene.box, origins, dirs, self.generator)
+        eps = self.poses.back(self.renderer.train(self.field, samples, dirs), turn)
         terms = stage.term.terms(eps, batch, self.iteration)
         loss = weighted_sum(terms, self.weights)
         named = {f"loss_{n}": t for n, t in terms.items()}
@@ -207,6 +226,9 @@ class NeuralSolver(IterativeSolver):
             raise DivergenceError(f"the loss became {out['loss']} at iteration {self.iteration}: the run diverged "
                                   "(try a lower train.lr)")
         self.optimisation.after_step(self.iteration + 1)
+        if self.poses.due(self.iteration + 1):
+            op = self.renderer.fitted_operator
+            self.poses.fit(lambda o, d: self.renderer.evaluate(self.estimate, self.scene.box, o, d, (op,))[op])
         self._timed(time.perf_counter() - t0)
         self.choice.after_step(self.iteration, lambda: self.estimate)
         self.counts.add(len(samples.positions), samples.n_rays, int(stats[-2]), int(stats[-1]))
@@ -234,8 +256,11 @@ class NeuralSolver(IterativeSolver):
         return self.estimate.on_grid(self.scene.box).cpu().numpy().astype(np.float64)
 
     def render(self, o: torch.Tensor, d: torch.Tensor, operators=("auto", "discrete")) -> dict:
-        """Deflections of sigma of rays (R, 3) by each operator, without any parameter graph."""
-        return self.renderer.evaluate(self.estimate, self.scene.box, o, d, operators)
+        """Deflections of sigma of rays (R, 3) by each operator, without any parameter graph; a training view's
+        rays where its pose is refined (:mod:`nerif.solvers.poses`), in the frame its camera measured them."""
+        with torch.no_grad():
+            o, d, turn = self.poses.rays(o, d)
+        return self.poses.back(self.renderer.evaluate(self.estimate, self.scene.box, o, d, operators), turn)
 
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
         """Deflections of sigma by the operator training fits (:attr:`DeflectionRenderer.fitted_operator`)."""
@@ -259,7 +284,8 @@ class NeuralSolver(IterativeSolver):
         return {**super().state_dict(), **self.optimisation.state_dict(), **self.counts.state_dict(),
                 "field": self.field.state_dict(), "sampler": self.sampler.state_dict(),
                 "generator": self.generator.get_state(), "converged": self.converged,
-                "data_term": self.data_term.state_dict(), "previous_stage": self.choice.previous}
+                "data_term": self.data_term.state_dict(), "poses": self.poses.state_dict(),
+                "previous_stage": self.choice.previous}
 
     def _load_field(self, st: dict, weights: Optional[dict] = None) -> None:
         try:
@@ -286,6 +312,7 @@ class NeuralSolver(IterativeSolver):
     def load_state_dict(self, st: dict) -> None:
         self._load_field(st)
         self.data_term.load_state_dict(st.get("data_term", {}))
+        self.poses.load_state_dict(st.get("poses", {}))
         self.optimisation.load_state_dict(st, int(st["iteration"]))
         self.choice.previous = st.get("previous_stage", st.get("flow_stage"))
         self.generator.set_state(st["generator"].cpu() if self.device.type == "cpu" else st["generator"])

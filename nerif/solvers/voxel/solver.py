@@ -86,8 +86,11 @@ class CGLSSolver(IterativeSolver):
                  reweight_every: int, tv_eps: float, ambient_faces, crossed_cover: float, ambient_fallback,
                  projector: str, max_matrix_gib: float,
                  step_mm: Optional[float], chunk: int, dtype: str, metrics: Mapping, seed: int, label: str,
-                 data_term: Optional[Mapping] = None, linearize_at: str = "flow"):
+                 data_term: Optional[Mapping] = None, linearize_at: str = "flow", poses: Optional[Mapping] = None):
         super().__init__(iterations=iterations, eval_every=eval_every, metrics=metrics, seed=seed, label=label)
+        if poses is not None and poses["name"] != "given":
+            raise ValueError(f"poses={poses['name']}: the voxel solver keeps the rig's poses as given; refine them "
+                             "with solver=nerif")
         if not lam >= 0:
             raise ValueError(f"solver.lam={lam}: a regularisation weight is at least 0")
         if REGULARIZERS.build({"name": regularizer}) is not None and not lam > 0:
