@@ -13,7 +13,8 @@ draw, clean and with ``--noise``: ``benchmarks/families.py``'s datasets). Each s
 with every default and ``uncertainty=<--method>``; the members (or the drawn fields) leave the trained field as it was (the reconstruction
 and its error are the run's without uncertainty: a test checks it), so the run's time less the members'
 (``uncertainty_time_s``) is the single run's. Columns, over the truth's flame voxels (|sigma| above 5 % of its
-peak): coverage at 1 and 2 standard deviations, at 2 in the hot core (the hottest 5 %), AUSE, Spearman's rank
+peak): coverage at 1 and 2 standard deviations, at 2 in the hot core (the hottest 5 %), AUSE and a random order's
+AUSE, the calibration error (the mean gap between nominal and observed coverage at 10 levels), Spearman's rank
 correlation of sigma_std and |error|, the sigma error, and the wall time over the single run's. Writes
 ``uncertainty.json`` and ``uncertainty.md`` under ``--out``.
 """
@@ -35,11 +36,13 @@ from nerif.data.families import FAMILIES, write_dataset  # noqa: E402
 from nerif.export import write_json  # noqa: E402
 
 KEYS = ("uncertainty_coverage_1sigma", "uncertainty_coverage_2sigma", "uncertainty_coverage_2sigma_core",
-        "uncertainty_ause", "uncertainty_spearman", "sigma_relative_error", "uncertainty_scale",
+        "uncertainty_ause", "uncertainty_ause_random", "uncertainty_calibration_error", "uncertainty_spearman",
+        "sigma_relative_error", "uncertainty_scale",
         "uncertainty_scale_from", "T_std_median_flame_K", "T_peak_K", "T_std_at_peak_K", "uncertainty_time_s",
         "total_time_s")
 COLUMNS = (("cover 1s", "uncertainty_coverage_1sigma"), ("cover 2s", "uncertainty_coverage_2sigma"),
            ("core 2s", "uncertainty_coverage_2sigma_core"), ("AUSE", "uncertainty_ause"),
+           ("AUSE random", "uncertainty_ause_random"), ("calibration error", "uncertainty_calibration_error"),
            ("Spearman", "uncertainty_spearman"), ("sigma error", "sigma_relative_error"),
            ("scale", "uncertainty_scale"), ("time x", "time_ratio"))
 

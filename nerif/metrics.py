@@ -1,6 +1,8 @@
 """Error metrics of a reconstruction (temperatures in K, deflections in rad)."""
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 import torch
 
@@ -59,7 +61,9 @@ def uncertainty_scores(sigma: np.ndarray, sigma_std: np.ndarray, sigma_true: np.
     Gaussian's are 0.683 and 0.954), ``coverage_2sigma_core`` (the same in the hot core: the ``core_share`` of the
     flame voxels of largest ``|sigma_true|``), ``ause`` (the area between the sparsification curves of the RMS error
     when the voxels are removed by ``sigma_std`` and by the error itself, over that of the error alone: 0 for a
-    perfect ranking), ``spearman`` (the rank correlation of ``sigma_std`` and ``|error|``). Empty without a flame."""
+    perfect ranking), ``ause_random`` (the same for a random order, the level a ranking must beat),
+    ``calibration_error`` (:func:`calibration_error`), ``spearman`` (the rank correlation of ``sigma_std`` and
+    ``|error|``). Empty without a flame."""
     from scipy.stats import spearmanr
 
     truth = np.abs(sigma_true)
@@ -70,22 +74,40 @@ def uncertainty_scores(sigma: np.ndarray, sigma_std: np.ndarray, sigma_true: np.
     core = truth[flame] >= np.quantile(truth[flame], 1.0 - core_share)
     return {"coverage_1sigma": float((err <= std).mean()), "coverage_2sigma": float((err <= 2 * std).mean()),
             "coverage_2sigma_core": float((err[core] <= 2 * std[core]).mean()),
-            "ause": ause(err, std), "spearman": float(spearmanr(std, err)[0])}
+            "ause": ause(err, std), "ause_random": ause(err, None), "calibration_error": calibration_error(err, std),
+            "spearman": float(spearmanr(std, err)[0])}
 
 
-def ause(err: np.ndarray, std: np.ndarray, steps: int = 50) -> float:
+CALIBRATION_LEVELS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95)
+
+
+def calibration_error(err: np.ndarray, std: np.ndarray, levels=CALIBRATION_LEVELS) -> float:
+    """The mean over nominal ``levels`` p of ``|observed - p|``, observed the share of ``err`` (M,) within the band of
+    +- z_p ``std`` (M,), z_p the Gaussian quantile of a two-sided p: 0 for errors drawn from Gaussians of those
+    widths (Lind et al. 2024 recommend it, with AUSE, over rank correlations)."""
+    from scipy.stats import norm
+
+    z = norm.ppf((1.0 + np.asarray(levels, dtype=np.float64)) / 2.0)
+    observed = (np.abs(err)[None, :] <= z[:, None] * np.asarray(std)[None, :]).mean(1)
+    return float(np.abs(observed - np.asarray(levels)).mean())
+
+
+def ause(err: np.ndarray, std: Optional[np.ndarray], steps: int = 50) -> float:
     """The area under the sparsification error curve (:func:`uncertainty_scores`): RMS of ``err`` (M,) left after
     removing the largest shares of the voxels by ``std`` (M,), less that after removing them by ``err`` itself (the
-    oracle), over shares 0 to 0.98, divided by the RMS of all of ``err``."""
-    order_std, order_err = np.argsort(-std, kind="stable"), np.argsort(-err, kind="stable")
+    oracle), over shares 0 to 0.98, divided by the RMS of all of ``err``. ``std=None``: a random order, whose
+    expected curve is the RMS of all of ``err`` at every share."""
+    order_err = np.argsort(-err, kind="stable")
     sq = err.astype(np.float64) ** 2
     shares = np.linspace(0.0, 0.98, steps)
 
     def curve(order):
+        if order is None:
+            return np.full(len(shares), np.sqrt(sq.mean()))
         rest = np.cumsum(sq[order][::-1])[::-1]  # rest[i]: the sum of squares from rank i on
         return np.array([np.sqrt(rest[int(f * len(sq))] / (len(sq) - int(f * len(sq)))) for f in shares])
 
-    gap = curve(order_std) - curve(order_err)
+    gap = curve(None if std is None else np.argsort(-std, kind="stable")) - curve(order_err)
     return float(((gap[1:] + gap[:-1]) / 2 * np.diff(shares)).sum() / np.sqrt(sq.mean())) if sq.mean() > 0 else 0.0
 
 

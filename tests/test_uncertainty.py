@@ -47,7 +47,26 @@ def test_scores_of_a_true_standard_deviation():
     err = np.abs(sigma - truth)[flame]
     assert ause(err, err) == pytest.approx(0.0, abs=1e-12)
     assert s["ause"] < ause(err, rng.random(err.shape)) - 0.1
+    # a random order's expected AUSE, in closed form, is what a shuffled one reaches
+    assert ause(err, rng.random(err.shape)) == pytest.approx(s["ause_random"], abs=0.02)
+    assert s["calibration_error"] < 0.01  # Gaussian errors of these widths: every nominal level met
     assert uncertainty_scores(sigma, std, np.zeros_like(truth)) == {}  # no flame: nothing to score
+
+
+def test_the_calibration_error_of_a_band_too_wide_or_too_narrow_is_the_gap_a_gaussian_gives():
+    """Errors of unit Gaussians scored against twice or half that width: at each nominal level p the observed
+    coverage is P(|N| <= k z_p), so the mean gap is known in closed form."""
+    from scipy.stats import norm
+
+    from nerif.metrics import CALIBRATION_LEVELS, calibration_error
+
+    err = np.abs(np.random.default_rng(1).standard_normal(400000))
+    p = np.asarray(CALIBRATION_LEVELS)
+    z = norm.ppf((1 + p) / 2)
+    for k in (2.0, 0.5):
+        expected = np.abs((2 * norm.cdf(k * z) - 1) - p).mean()
+        assert calibration_error(err, np.full_like(err, k)) == pytest.approx(expected, abs=0.003)
+    assert calibration_error(err, np.ones_like(err)) < 0.003
 
 
 def test_ensemble_settings_are_checked_in_one_sentence():

@@ -27,7 +27,10 @@ log = logging.getLogger(__name__)
 
 declare(uncertainty_coverage_1sigma=SHARE, uncertainty_coverage_2sigma=SHARE, uncertainty_coverage_2sigma_core=SHARE,
         uncertainty_spearman="1 (rank correlation)",
-        uncertainty_ause="1 (area under the sparsification error, of sigma)", sigma_std_median_flame=SIGMA,
+        uncertainty_ause="1 (area under the sparsification error, of sigma)",
+        uncertainty_ause_random="1 (the same for a random order)",
+        uncertainty_calibration_error="1 (mean |observed - nominal| coverage at 10 levels from 0.1 to 0.95)",
+        sigma_std_median_flame=SIGMA,
         ray_binning="px (sensor pixels across a ray)", shake_px_max="px (of the full sensor)",
         text=("temperature_note", "deflection_unit", "history_note"),
         containers={"measurement": "(per camera name: its findings, each unit by its name here)"})
