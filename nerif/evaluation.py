@@ -48,16 +48,17 @@ Predict = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (R, 3) origins
 
 def displacement_noise(scene: Scene) -> Optional[np.ndarray]:
     """(V,) what the flow's own noise leaves of a perfect prediction of each view's displacements [px of the full
-    sensor]: sqrt 2 (both components) times its vectors' noise (:func:`nerif.sensing.vectors.vector_noise`); None
-    where the displacements were not measured from images (or a view's noise could not be read)."""
+    sensor]: sqrt 2 (both components) times its vectors' noise (:func:`nerif.sensing.vectors.vector_noise`), NaN for
+    a view whose noise cannot be read (too few vectors); None where the displacements were not measured from
+    images."""
+    if any(view.measured_px is None for view in scene.views):
+        return None
     noise = []
     for view in scene.views:
-        if view.measured_px is None:
-            return None
         u = np.asarray(view.measured_px, dtype=np.float64)
         ok = np.isfinite(u).all(-1)
         noise.append(np.sqrt(2.0) * vector_noise(np.where(ok[..., None], u, 0.0), ok))
-    return np.asarray(noise) if all(n > 0 for n in noise) else None
+    return np.where(np.asarray(noise) > 0, noise, np.nan)
 
 
 def fixed_rays(scene: Scene, per_view: int, seed: int) -> torch.Tensor:
@@ -98,7 +99,8 @@ class Evaluation:
                 self.heldout_displacements = h.displacement_px
                 self.peaks["displacement"] = value_range(self.heldout_displacements)
                 noise = displacement_noise(h)
-                self.heldout_noise_px = None if noise is None else float(noise.mean())
+                known = None if noise is None else noise[np.isfinite(noise)]
+                self.heldout_noise_px = float(known.mean()) if known is not None and known.size else None
 
     @property
     def physical(self) -> bool:
@@ -124,20 +126,21 @@ class Evaluation:
         s, i = self.scene, self.train_index
         return s.origins[s.ray_views()[i]], s.dirs[i]
 
-    def view_misfits(self, predicted: torch.Tensor) -> dict:
-        """``view_misfit_over_noise``: each training view's displacement RMSE on its fixed rays over what the flow's
-        noise leaves it (``predicted``: (R, 3) sigma units on :meth:`train_rays`); empty where the displacements
-        were not measured from images. A view the others contradict (its images swapped with another's, its camera
-        moved) stands out: the field cannot fit it and them at once."""
-        if self.view_noise_px is None:
+    def view_misfits(self, predict: Predict) -> dict:
+        """``view_misfit_over_noise``: each training view's displacement RMSE on its fixed rays (``predict``'s, sigma
+        units, :meth:`train_rays`) over what the flow's noise leaves it, None for a view whose noise could not be
+        read; empty (nothing rendered) where the displacements were not measured from images. A view the others
+        contradict (its images swapped with another's, its camera moved) stands out: the field cannot fit it and
+        them at once."""
+        if self.view_noise_px is None or not np.isfinite(self.view_noise_px).any():
             return {}
         s, i = self.scene, self.train_index
-        miss = (s.to_displacement(predicted * s.scale, i) - s.displacement_px[i]).double().pow(2).sum(-1)
+        miss = (s.to_displacement(predict(*self.train_rays()) * s.scale, i) - s.displacement_px[i]).double()
         views = s.ray_views()[i]
-        ms = torch.zeros(s.n_views, dtype=torch.float64, device=miss.device).index_add_(0, views, miss)
+        ms = torch.zeros(s.n_views, dtype=torch.float64, device=miss.device).index_add_(0, views, miss.pow(2).sum(-1))
         n = torch.bincount(views, minlength=s.n_views).clamp_min(1)
-        rmse_px = (ms / n).sqrt().cpu().numpy()
-        return {"view_misfit_over_noise": [round(float(r), 3) for r in rmse_px / self.view_noise_px]}
+        ratio = (ms / n).sqrt().cpu().numpy() / self.view_noise_px
+        return {"view_misfit_over_noise": [round(float(r), 3) if np.isfinite(r) else None for r in ratio]}
 
     def deflection_errors(self, predicted: dict) -> dict:
         """``deflection_rmse_<name>`` [rad] of each prediction (name -> (R, 3) sigma units on :meth:`train_rays`)
@@ -241,11 +244,11 @@ class Evaluation:
     def contradicted(m: dict) -> str:
         """One sentence naming the training views the fit explains far worse than the others (``view_misfit_over_noise``
         of ``m`` above :data:`CONTRADICTED` times the median of every view's), with the usual causes; else ""."""
-        ratios = m.get("view_misfit_over_noise")
-        if not ratios or len(ratios) < 3:
+        ratios = m.get("view_misfit_over_noise") or []
+        if sum(r is not None for r in ratios) < 3:
             return ""
-        median = float(np.median(ratios))
-        worse = [v for v, r in enumerate(ratios) if r > CONTRADICTED * median]
+        median = float(np.median([r for r in ratios if r is not None]))
+        worse = [v for v, r in enumerate(ratios) if r is not None and r > CONTRADICTED * median]
         if not worse:
             return ""
         return (f"training view(s) {worse} are explained far worse than the others ("
@@ -262,7 +265,8 @@ class Evaluation:
         explains none of its views, too short or too coarse, is not a view it did not see), naming the usual causes;
         else ""."""
         ratio = m.get("heldout_misfit_over_noise")
-        trained = float(np.median(m["view_misfit_over_noise"])) if m.get("view_misfit_over_noise") else None
+        trained = [r for r in m.get("view_misfit_over_noise") or [] if r is not None]
+        trained = float(np.median(trained)) if trained else None
         if ratio is None or not ratio > UNEXPLAINED or (trained is not None and not ratio > UNSEEN * trained):
             return ""
         than = f", {ratio / trained:.1f}x the training views' median" if trained else ""

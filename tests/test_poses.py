@@ -7,27 +7,9 @@ import pytest
 import torch
 
 from nerif.data.scene import Scene, views_of
-from nerif.geometry import ProbeBox, arc_rig, rays_in_box
-from nerif.physics import Ambient
+from nerif.geometry import arc_rig, rays_in_box
 from nerif.solvers.poses import POSES, RefinedPoses, rotation_matrices
-
-BOX = ProbeBox((20, 24, 20), 2.0)
-AMBIENT = Ambient(296.15, 1.00027, 2000.0)
-BLOBS = [((8.0, 4.0, -5.0), 4.0, -1.0), ((-6.0, -6.0, 7.0), 3.0, -0.6), ((2.0, 9.0, 9.0), 3.5, -0.4)]  # c, w, A
-
-
-def analytic(o: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
-    """(R, 3) deflections of sigma of three Gaussian blobs along whole lines (o, d), in closed form: a blob
-    ``A exp(-|x - c|^2 / 2 w^2)`` deflects a line passing at ``b`` (from c to the line's nearest point) by
-    ``-A sqrt(2 pi) b / w exp(-|b|^2 / 2 w^2)``; nothing along the line."""
-    o, d = o.double(), d.double()
-    out = torch.zeros_like(o)
-    for c, w, A in BLOBS:
-        c = torch.tensor(c, dtype=torch.float64)
-        p = o + ((c - o) * d).sum(-1, keepdim=True) * d
-        b = p - c
-        out += -A * math.sqrt(2 * math.pi) / w * b * torch.exp(-(b * b).sum(-1, keepdim=True) / (2 * w * w))
-    return out
+from tests.helpers import AMBIENT, BOX, analytic
 
 
 def turned(deg: float) -> np.ndarray:
@@ -79,7 +61,9 @@ def test_moved_rays_render_the_field_as_the_camera_measured_it_and_other_rays_as
     turns = [2.0, -3.0, 1.5, -1.0, 3.0, -2.5, 0.5, -0.5]
     scene = given_scene(turns)
     poses = RefinedPoses().setup(scene, 100)
-    poses.omega[:, 1] = -torch.tensor(np.radians(turns))
+    omega = torch.zeros_like(poses.omega)
+    omega[:, 1] = -torch.tensor(np.radians(turns))
+    poses.load_state_dict({"omega": omega, "t": poses.t, "fits": 0})
     o, d, turn = poses.rays(scene.origins[scene.ray_views()], scene.dirs)
     eps = poses.back({"eps": analytic(o, d)}, turn)["eps"]
     scale = float(scene.observed.abs().max())  # float32 rays 800 mm out: agreement to 1e-3 of the largest

@@ -177,7 +177,7 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float,
                               "rad" if amb.temperature_known else "sigma"), out_dir / "curves.png")
     final = dict(solver.history[-1]) if solver.history else solver.evaluate()
     final.pop("iteration", None)
-    final.update(solver.evaluation.view_misfits(solver.predict(*solver.evaluation.train_rays())))
+    final.update(solver.evaluation.view_misfits(solver.predict))
     contradicted = solver.evaluation.contradicted(final)
     if contradicted:
         log.warning("%s", contradicted)

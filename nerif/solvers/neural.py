@@ -258,8 +258,7 @@ class NeuralSolver(IterativeSolver):
     def render(self, o: torch.Tensor, d: torch.Tensor, operators=("auto", "discrete")) -> dict:
         """Deflections of sigma of rays (R, 3) by each operator, without any parameter graph; a training view's
         rays where its pose is refined (:mod:`nerif.solvers.poses`), in the frame its camera measured them."""
-        with torch.no_grad():
-            o, d, turn = self.poses.rays(o, d)
+        o, d, turn = self.poses.rays(o, d)
         return self.poses.back(self.renderer.evaluate(self.estimate, self.scene.box, o, d, operators), turn)
 
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 import torch
@@ -107,18 +107,31 @@ class RefinedPoses(GivenPoses):
     def __init__(self, at=(0.25, 0.5, 0.75), steps: int = 2, rays_per_view: int = 256, damping: float = 0.01,
                  min_gain: float = 0.15, bound_deg: float = 6.0, bound_mm: float = 20.0, min_views: int = 4,
                  seed: int = 0):
-        self.at = tuple(float(a) for a in at)
-        if not self.at or not all(0.0 < a < 1.0 for a in self.at):
-            raise ValueError(f"poses.at={list(at)}: shares of the run's iterations, each within (0, 1)")
-        for key, v in (("bound_deg", bound_deg), ("bound_mm", bound_mm), ("damping", damping)):
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
-                raise ValueError(f"poses.{key}={v}: a positive number")
-        if int(steps) < 1 or int(rays_per_view) < 8:
-            raise ValueError(f"poses.steps={steps}, poses.rays_per_view={rays_per_view}: at least 1 step and 8 rays")
-        self.steps, self.rays_per_view, self.damping = int(steps), int(rays_per_view), float(damping)
+        def number(v, whole: bool = False) -> bool:
+            ok = isinstance(v, int) if whole else isinstance(v, (int, float))
+            return ok and not isinstance(v, bool) and math.isfinite(v)
+
+        def key(name: str, value, what: str, ok: bool) -> None:
+            if not ok:
+                raise ValueError(f"poses.{name}={value!r}: {what}")
+
+        shares = [at] if number(at) else list(at) if isinstance(at, Sequence) and not isinstance(at, str) else None
+        key("at", at, "shares of the run's iterations, each within (0, 1), e.g. [0.25, 0.5, 0.75]",
+            bool(shares) and all(number(a) and 0.0 < a < 1.0 for a in shares))
+        for name, v in (("steps", steps), ("min_views", min_views)):
+            key(name, v, "a whole number of at least 2" if name == "min_views" else "a whole number of at least 1",
+                number(v, whole=True) and v >= (2 if name == "min_views" else 1))
+        key("rays_per_view", rays_per_view, "a whole number of at least 8", number(rays_per_view, True) and rays_per_view >= 8)
+        for name, v in (("bound_deg", bound_deg), ("bound_mm", bound_mm), ("damping", damping)):
+            key(name, v, "a positive number", number(v) and v > 0)
+        key("min_gain", min_gain, "a share of a view's misfit within [0, 1)", number(min_gain) and 0 <= min_gain < 1)
+        key("seed", seed, "a whole number", number(seed, whole=True))
+        self.at = tuple(float(a) for a in shares)
+        self.steps, self.rays_per_view, self.damping = steps, rays_per_view, float(damping)
         self.min_gain = float(min_gain)
         self.bound_rad, self.bound_mm = math.radians(bound_deg), float(bound_mm)
-        self.min_views, self.seed = int(min_views), int(seed)
+        self.min_views, self.seed = min_views, seed
+        self.moved = False  # whether any offset is not zero (kept here: reading the tensors waits for the device)
         self.fits = 0
 
     def setup(self, scene, iterations: int) -> "RefinedPoses":
@@ -139,7 +152,7 @@ class RefinedPoses(GivenPoses):
         axes = torch.stack([torch.as_tensor(np.asarray(c.rotation, dtype=np.float64)[:, :2].T) for c in scene.cameras])
         self.across = axes.to(device)  # (V, 2, 3): each camera's image right and down in the world
         self.index = torch.cat([s + torch.multinomial(weight[s:e], min(self.rays_per_view, e - s), generator=g)
-                                for s, e in zip(scene.view_start[:-1].tolist(), scene.view_start[1:].tolist())])
+                                for s, e in zip(scene.view_start[:-1].tolist(), scene.view_start[1:].tolist()) if e > s])
         self.scene = scene
         return self
 
@@ -154,7 +167,7 @@ class RefinedPoses(GivenPoses):
         return torch.where(nearest.values < 1e-4, nearest.indices, torch.full_like(nearest.indices, -1))
 
     @staticmethod
-    def _moved(origins, dirs, view, R, shift):
+    def _move(origins, dirs, view, R, shift):
         """Rays (R, 3) of ``view`` (-1: none) moved by the views' rotations R (V, 3, 3) and shifts (V, 3), in their
         dtype; and each ray's rotation (the identity where it belongs to no view)."""
         known = (view >= 0)[:, None, None]
@@ -166,9 +179,9 @@ class RefinedPoses(GivenPoses):
     def rays(self, origins: torch.Tensor, dirs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
         """Rays (R, 3) of the training views moved by their offsets, and (R, 3, 3) each ray's rotation (the identity
         for a ray of no training view); the rays as given and None while every offset is zero."""
-        if not (self.omega.any() or self.t.any()):
+        if not self.moved:
             return origins, dirs, None
-        return self._moved(origins, dirs, self.views_of(origins), rotation_matrices(self.omega).float(), self.t.float())
+        return self._move(origins, dirs, self.views_of(origins), rotation_matrices(self.omega).float(), self.t.float())
 
     def back(self, eps: dict, turn: Optional[torch.Tensor]) -> dict:
         """Deflections (R, 3) rendered along moved rays -> in the frame their cameras measured them (``R^T``)."""
@@ -185,7 +198,7 @@ class RefinedPoses(GivenPoses):
         o0, d0, observed = sc.origins[view], sc.dirs[idx], sc.observed[idx].double()
 
         def predicted(omega, t):  # (V, 3) offsets -> (R, 3) the chosen rays' deflections, as their cameras see them
-            o, d, R = self._moved(o0, d0, view, rotation_matrices(omega), t)
+            o, d, R = self._move(o0, d0, view, rotation_matrices(omega), t)
             return self.back({"eps": render(o, d).double()}, R)["eps"]
 
         for _ in range(self.steps):
@@ -193,6 +206,7 @@ class RefinedPoses(GivenPoses):
             self.omega = (omega - omega.mean(0)).clamp(-self.bound_rad, self.bound_rad)
             self.t = (t - t.mean(0)).clamp(-self.bound_mm, self.bound_mm)
         self.fits += 1
+        self.moved = bool(self.omega.any() or self.t.any())  # once a fit, not every step
 
     def _step(self, predicted: Callable, observed: torch.Tensor, view: torch.Tensor) -> tuple:
         """One Levenberg-Marquardt step of each view's five numbers (its rotation vector, its shift across its axis:
@@ -253,3 +267,4 @@ class RefinedPoses(GivenPoses):
     def load_state_dict(self, st: dict) -> None:
         if "omega" in st:
             self.omega, self.t, self.fits = st["omega"].to(self.omega), st["t"].to(self.t), int(st["fits"])
+            self.moved = bool(self.omega.any() or self.t.any())
