@@ -172,6 +172,8 @@ def series_metrics(rows: list[dict], frames: list[Frame], cfg: DictConfig) -> di
         vals = [r[k] for r in rows if r.get(k) is not None]
         if vals and isinstance(vals[0], str):  # a choice per frame (data_term_kept): how often each was made
             return ", ".join(f"{v} in {vals.count(v)} of {len(rows)} frames" for v in sorted(set(vals)))
+        if vals and isinstance(vals[0], list):  # an interval per frame: the mean of each end
+            return np.mean(np.asarray(vals, dtype=np.float64), axis=0).tolist()
         return float(np.mean(vals)) if vals else None
 
     m = {k: mean(k) for k in FINAL_KEYS if k not in ("iterations", "wall_time_s")}

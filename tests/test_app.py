@@ -306,6 +306,9 @@ def test_the_summary_line_names_the_peak_temperature_the_true_one_and_the_flames
     m.update(T_peak_true_K=1861.0, T_peak_error_K=-318.6, flame_volume_true_cm3=15.1, T_std_at_peak_K=112.0)
     assert "peak T 1542 +- 112 K at (0.5, 31.5, -0.5) mm (true 1861 K, -319 K), 12.3 cm3 above 1000 K (true 15.1)" in \
         summary_line(m, Path("out"))
+    m.update(T_peak_interval_K=[1446.2, 2806.4], flame_volume_interval_cm3=[10.14, 16.9])  # issue 59: intervals
+    assert ("peak T 1542 K (2 std: 1446-2806) at (0.5, 31.5, -0.5) mm (true 1861 K, -319 K), 12.3 cm3 "
+            "(2 std: 10.1-16.9) above 1000 K (true 15.1)") in summary_line(m, Path("out"))
 
 
 def test_the_share_of_the_held_out_displacements_explained_falls_with_the_fit_and_leads_the_summary():

@@ -313,6 +313,8 @@ def test_a_series_capture_reconstructs_every_frame_warm_started(series, tmp_path
     kept = [r["data_term_kept"] for r in m["frames"]]  # each frame's held-out choice, and how often the series made it
     assert set(kept) <= {"images", "flow"} and m["data_term_kept"].endswith(f"in {kept.count(max(kept))} of 3 frames")
     assert (tmp_path / "sequence.pvd").read_text().count("reconstruction.vti") == 3
+    lo, hi = m["T_peak_interval_K"]  # issue 59: each frame's interval (a held-out view each), their ends' means
+    assert lo <= m["T_peak_K"] <= hi
 
 
 def test_optional_rig_keys_left_null_take_their_defaults(written, tmp_path):

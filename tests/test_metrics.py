@@ -50,3 +50,75 @@ def test_temperature_figures_give_the_peak_where_it_is_and_the_volume_above_a_te
     assert abs(f["flame_volume_cm3"] - 45 * 8e-3) < 1e-12 and abs(f["flame_volume_true_cm3"] - 54 * 8e-3) < 1e-12
     assert f["T_peak_true_K"] == 1900.0 and f["T_peak_error_K"] == -100.0 and f["flame_volume_above_K"] == 1000.0
     assert "T_peak_true_K" not in temperature_figures(T, box.axes(), 1000.0)
+
+
+def _blob_temperature():
+    """A smooth, flat-topped hot blob on a 2 mm grid (sigma of air at 300 K and a flame to 1800 K), and sigma -> T."""
+    from nerif.geometry import ProbeBox
+    from nerif.physics import Ambient
+
+    amb = Ambient(T0=300.0, n0=1.000293, T_max=2000.0)
+    box = ProbeBox((16, 24, 16), 2.0)
+    x, y, z = np.meshgrid(*box.axes(), indexing="ij")
+    T = 300.0 + 1500.0 * np.exp(-((x**2 + (y - 4.0) ** 2 + z**2) / 10.0**2) ** 2)  # flat-topped: no finer peak
+    return box, amb, amb.sigma_from_temperature(T), amb.temperature_from_sigma
+
+
+def test_the_intervals_of_the_peak_and_the_volume_hold_the_truth_as_often_as_they_say():
+    """Issue 59: a reconstruction wrong by one offset over the whole field (an error correlated over the flame, one
+    draw of N(0, u) per reconstruction) with sigma_std = u: the peak's and the volume's 2-sigma intervals hold the
+    true figures in about 95 % of the draws (both bounds are monotonic in the offset: exactly when |offset| <= 2u
+    on the cold side, the hot side wider); a standard deviation a third too small holds them far less often."""
+    from nerif.metrics import reported_intervals, temperature_figures, within_intervals
+
+    box, amb, truth, temperature = _blob_temperature()
+    rng = np.random.default_rng(0)
+    u = 0.03
+    held = {0.0: [], 1.0: []}
+    for _ in range(300):
+        offset = rng.normal(0.0, u)
+        sigma = truth + offset
+        fig = temperature_figures(temperature(sigma), box.axes(), 1000.0, temperature(truth))
+        for shrink in held:
+            std = np.full(sigma.shape, u / (3.0 if shrink else 1.0))
+            iv = reported_intervals(sigma, std, temperature, box.axes(), 1000.0, amb.sigma_from_temperature(2000.0))
+            held[shrink].append(within_intervals({**fig, **iv}))
+    for key in ("T_peak_in_interval", "flame_volume_in_interval", "T_peak_position_in_interval"):
+        share = np.mean([w[key] for w in held[0.0]])
+        assert 0.93 <= share <= 1.0, (key, share)
+    assert np.mean([w["T_peak_in_interval"] for w in held[1.0]]) < 0.75
+    assert np.mean([w["flame_volume_in_interval"] for w in held[1.0]]) < 0.9  # a count of voxels: steps
+
+
+def test_the_peak_interval_of_a_flat_top_is_the_band_of_its_value_and_a_lone_spike_widens_it_on_the_hot_side():
+    """A plateau of sigma s0 over a box of voxels, domed by 1e-4 towards its centre (nothing finer than a voxel) with sigma_std u: the
+    peak's interval is [T(s0 + 2u), T(s0 - 2u)], the peak could lie anywhere on the plateau (the box of
+    its voxels, half a voxel out), and the volume interval counts the plateau alone. A one-voxel spike above it
+    (what a field cannot resolve: a sharp tip smoothed, or streaks crossing) moves both bounds further than 2u."""
+    from nerif.geometry import ProbeBox
+    from nerif.metrics import reported_intervals
+    from nerif.physics import Ambient
+
+    amb = Ambient(T0=300.0, n0=1.000293, T_max=2000.0)
+    T_of = amb.temperature_from_sigma
+    box = ProbeBox((16, 16, 16), 2.0)
+    s0, u = float(amb.sigma_from_temperature(1500.0)), 0.02
+    x, y, z = np.meshgrid(*[np.arange(n) - c for n, c in zip(box.shape, (7.5, 7.5, 7.5))], indexing="ij")
+    sigma = np.zeros(box.shape)
+    sigma[2:14, 2:14, 2:14] = s0 * (1.0 + 1e-4 * np.exp(-(x**2 + y**2 + z**2) / 18.0))[2:14, 2:14, 2:14]  # 1728
+    std = np.full(box.shape, u)
+    iv = reported_intervals(sigma, std, T_of, box.axes(), 1000.0, -1.05)
+    top = sigma.min()  # the dome's centre
+    assert iv["T_peak_interval_K"] == pytest.approx([T_of(top + 2 * u), T_of(top - 2 * u)], rel=1e-6)
+    axes = box.axes()
+    np.testing.assert_allclose(iv["T_peak_position_interval_mm"], [[axes[k][2] - 1, axes[k][13] + 1] for k in range(3)])
+    assert iv["flame_volume_interval_cm3"] == pytest.approx([1728 * 8e-3, 1728 * 8e-3])
+    spike, narrow = sigma.copy(), np.full(box.shape, 0.005)
+    spike[7, 7, 7] = float(amb.sigma_from_temperature(1900.0))
+    sp = reported_intervals(spike, narrow, T_of, box.axes(), 1000.0, -1.05)
+    assert sp["T_peak_interval_K"][0] < T_of(spike[7, 7, 7] + 2 * 0.005) - 50.0
+    assert sp["T_peak_interval_K"][1] > T_of(spike[7, 7, 7] - 2 * 0.005) + 50.0
+    for (lo, hi), a in zip(sp["T_peak_position_interval_mm"], axes):  # the spike or anywhere on the plateau
+        assert lo <= a[7] <= hi
+    clipped = reported_intervals(sigma, np.full(box.shape, 1.0), T_of, box.axes(), 1000.0, -1.05)
+    assert clipped["T_peak_interval_K"][1] == pytest.approx(T_of(-1.05))  # no hotter than the prior allows

@@ -30,3 +30,11 @@ def test_the_hydra_callback_writes_the_tables_beside_the_jobs(tmp_path, capsys):
     _job(tmp_path / "0_x", [], {"deflection_rmse": 1e-5})
     MultirunSummary().on_multirun_end(OmegaConf.create({"hydra": {"sweep": {"dir": str(tmp_path)}}}))
     assert (tmp_path / "summary.md").is_file() and "(defaults)" in capsys.readouterr().out
+
+
+def test_the_peak_interval_is_a_column_of_its_own(tmp_path):
+    """Issue 59: a sweep compares the peak's 2-std interval across its jobs."""
+    _job(tmp_path / "0", ["seed=0"], {"T_peak_K": 1533.2, "T_peak_interval_K": [1071.4, 2698.6]})
+    md = write_tables(collect(tmp_path), tmp_path)
+    assert md.splitlines()[0] == "| config | peak T [K] | its 2-std interval [K] |"
+    assert md.splitlines()[2] == "| seed=0 | 1533 | 1071-2699 |"

@@ -122,6 +122,14 @@ def test_the_outputs_carry_the_uncertainty(family_run):
     assert b'Name="sigma_std"' in text and b'Name="T_std"' in text
     assert m["uncertainty_scale_from"] == "held-out views" and m["T_std_median_flame_K"] > 0
     assert m["T_std_at_peak_K"] > 0 and abs(m["T_peak_K"] - 300.0) > 100
+    # issue 59: the reported figures' intervals hold the figures themselves, and are scored against the truth
+    lo, hi = m["T_peak_interval_K"]
+    assert lo < m["T_peak_K"] < hi
+    assert all(a <= c <= b for (a, b), c in zip(m["T_peak_position_interval_mm"], m["T_peak_position_mm"]))
+    least, most = m["flame_volume_interval_cm3"]
+    assert least <= m["flame_volume_cm3"] <= most
+    for key in ("T_peak_in_interval", "T_peak_position_in_interval", "flame_volume_in_interval"):
+        assert m[key] in (0.0, 1.0) and unit_of(key) is not None
 
 
 def test_coverage_and_correlation_on_a_known_truth(family_run):
@@ -170,3 +178,40 @@ def test_a_solver_without_members_is_refused_before_training(tmp_path):
 
     with pytest.raises(ValueError, match="uncertainty=ensemble needs a solver that trains members; solver=cgls"):
         run(tiny_config("solver=cgls", "uncertainty=ensemble"), tmp_path)
+
+
+def test_the_default_estimates_an_ensemble_only_where_the_run_can_calibrate_one(caplog):
+    """``uncertainty=auto`` (the default): the ensemble's members, with its settings, where a neural solver's data
+    hold a view out and its training views spare one a member; else no uncertainty, said in the log, never a
+    refusal (a run on data without a held-out view goes on as it was)."""
+    import logging
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from tests.helpers import trained_on_half_the_box
+
+    s, scene = trained_on_half_the_box()
+    settings = {"members": 2, "fraction": 0.5}
+    auto = UNCERTAINTY.build({"name": "auto", **settings})
+    auto.check(s)
+    out = auto(s)
+    ens = UNCERTAINTY.build({"name": "ensemble", **settings})(s)
+    assert out["report"]["uncertainty_scale_from"] == "held-out views"
+    np.testing.assert_allclose(out["volumes"]["sigma_std"], ens["volumes"]["sigma_std"], rtol=1e-4, atol=1e-7)
+    s.scene = replace(scene, heldout=None)
+    with caplog.at_level(logging.INFO, logger="nerif.solvers.uncertainty"):
+        assert auto(s) == {}
+    assert "the data hold no view out" in caplog.text and "no uncertainty estimated" in caplog.text
+    s.scene = scene
+    assert "cannot spare 9" in UNCERTAINTY.build({"name": "auto", "leave_out": 9}).without(s)
+    voxel = SimpleNamespace(trains_members=False, name="cgls", scene=scene)
+    auto.check(voxel)  # no refusal
+    assert auto.without(voxel) == "solver=cgls trains no members"
+
+
+def test_the_default_takes_the_ensembles_settings_from_its_file():
+    from nerif.configs import compose
+
+    auto, ens = compose([]).uncertainty, compose(["uncertainty=ensemble"]).uncertainty
+    assert auto.name == "auto" and ens.name == "ensemble"
+    assert {k: v for k, v in auto.items() if k != "name"} == {k: v for k, v in ens.items() if k != "name"}

@@ -18,13 +18,18 @@ import torch
 import nerif.io.plots as plots
 from nerif.cache import cached_arrays, content_digest, source_digest
 from nerif.export import atomic_write, to_uint8, write_npz, write_png, write_vti
-from nerif.metrics import temperature_figures, uncertainty_scores
+from nerif.metrics import reported_intervals, temperature_figures, uncertainty_scores, within_intervals
 from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
                              profiles_figure, save_figure, sensing_figure, slice_figure)
 from nerif.units import SHARE, SIGMA, VOLUMES, declare
 
 log = logging.getLogger(__name__)
 
+INSIDE = "1 (1: the true figure lies in its interval, 0: it does not)"
+declare(T_peak_interval_K="K (the peak's 2-standard-deviation interval: [cold, hot])",
+        T_peak_position_interval_mm="mm (per axis [lo, hi]: the box of the voxels that could be the hottest)",
+        flame_volume_interval_cm3="cm^3 (the flame volume's 2-standard-deviation interval: [least, most])",
+        T_peak_in_interval=INSIDE, T_peak_position_in_interval=INSIDE, flame_volume_in_interval=INSIDE)
 declare(uncertainty_coverage_1sigma=SHARE, uncertainty_coverage_2sigma=SHARE, uncertainty_coverage_2sigma_core=SHARE,
         uncertainty_spearman="1 (rank correlation)",
         uncertainty_ause="1 (area under the sparsification error, of sigma)",
@@ -203,6 +208,11 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float,
         final.update(temperature_figures(vols["T"], box.axes(), flame_above_K, scene.truth_T))
     if "sigma_std" in vols:
         final.update(uncertainty_report(vols, scene))
+        if amb.temperature_known:
+            lowest = solver.interval[0] if hasattr(solver, "interval") else float(sigma.min())
+            final.update(reported_intervals(sigma, vols["sigma_std"], amb.temperature_from_sigma, box.axes(),
+                                            flame_above_K, lowest))
+            final.update(within_intervals(final))
     if scene.sensing is not None:
         final.update(scene.sensing.report())
     final.update(measurement_report(scene, solver.shakes_px()))
@@ -236,16 +246,20 @@ def measurement_report(scene, refined: Optional[torch.Tensor] = None) -> dict:
 def temperature_words(m: dict) -> str:
     """The summary line's temperatures: the peak (+- one standard deviation where estimated) and where it is, the
     true peak and the peak's error where a truth is known, and the flame's volume."""
-    std = f" +- {m['T_std_at_peak_K']:.0f}" if m.get("T_std_at_peak_K") is not None else ""
+    std = f" +- {m['T_std_at_peak_K']:.0f} K" if m.get("T_std_at_peak_K") is not None else " K"
+    if m.get("T_peak_interval_K") is not None:  # the peak's own interval (nerif.metrics.reported_intervals)
+        std = " K (2 std: {:.0f}-{:.0f})".format(*m["T_peak_interval_K"])
     where = m.get("T_peak_position_mm")
     at = f" at ({', '.join(f'{c:.1f}' for c in where)}) mm" if isinstance(where, list) else ""
     true = (f" (true {m['T_peak_true_K']:.0f} K, {m['T_peak_error_K']:+.0f} K)"
             if m.get("T_peak_true_K") is not None else "")
     volume = ""
     if m.get("flame_volume_cm3") is not None and m.get("flame_volume_above_K") is not None:
-        volume = f", {m['flame_volume_cm3']:.3g} cm3 above {m['flame_volume_above_K']:.0f} K" + (
+        spread = (" (2 std: {:.3g}-{:.3g})".format(*m["flame_volume_interval_cm3"])
+                  if m.get("flame_volume_interval_cm3") is not None else "")
+        volume = f", {m['flame_volume_cm3']:.3g} cm3{spread} above {m['flame_volume_above_K']:.0f} K" + (
             f" (true {m['flame_volume_true_cm3']:.3g})" if m.get("flame_volume_true_cm3") is not None else "")
-    return f"peak T {m['T_peak_K']:.0f}{std} K{at}{true}{volume}"
+    return f"peak T {m['T_peak_K']:.0f}{std}{at}{true}{volume}"
 
 
 def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:

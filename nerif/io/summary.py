@@ -28,6 +28,7 @@ COLUMNS = [("temperature_rmse_K", "T RMSE [K]", "{:.2f}"), ("temperature_rmse_fl
            ("heldout_displacement_rmse_px", "held-out displacement RMSE [px]", "{:.3f}"),
            ("data_term_kept", "field kept (held out)", "{}"),
            ("T_peak_K", "peak T [K]", "{:.0f}"), ("T_std_at_peak_K", "its std [K]", "{:.0f}"),
+           ("T_peak_interval_K", "its 2-std interval [K]", "{0[0]:.0f}-{0[1]:.0f}"),
            ("T_peak_error_K", "peak T error [K]", "{:+.0f}"), ("flame_volume_cm3", "flame volume [cm3]", "{:.3g}"),
            ("T_std_median_flame_K", "T std in the flame [K]", "{:.1f}"),
            ("uncertainty_coverage_2sigma", "truth within 2 std", "{:.3f}"), ("iterations", "iterations", "{}")]
