@@ -304,7 +304,7 @@ def test_bad_series_folders_are_one_sentence_before_any_flow(series, tmp_path, m
 def test_a_series_capture_reconstructs_every_frame_warm_started(series, tmp_path):
     root = series[0]
     cfg = tiny_config("data=capture", f"data.root={root}", "data.binning=8", "train.iterations=40",
-                      "sequence.iterations=10", synthetic=False)
+                      "sequence.iterations=10", "uncertainty=auto", synthetic=False)
     m = run(cfg, tmp_path)
     # each frame fits the flow for its iterations, then the images for half as many more (data_term.image_iterations)
     assert [(r["frame"], r["warm_start"], r["iterations"]) for r in m["frames"]] == [(0, False, 60), (1, True, 15),

@@ -166,7 +166,7 @@ def test_a_run_without_uncertainty_writes_none(tmp_path):
     from nerif.app import run
     from tests.helpers import tiny_config
 
-    m = run(tiny_config("train.iterations=2"), tmp_path)
+    m = run(tiny_config("train.iterations=2", "uncertainty=auto"), tmp_path)  # the default, without a held-out view
     assert "uncertainty_scale" not in m and "T_std_median_flame_K" not in m
     with np.load(tmp_path / "reconstruction.npz") as z:
         assert "sigma_std" not in z and "T_std" not in z
