@@ -111,12 +111,18 @@ def ause(err: np.ndarray, std: Optional[np.ndarray], steps: int = 50) -> float:
     return float(((gap[1:] + gap[:-1]) / 2 * np.diff(shares)).sum() / np.sqrt(sq.mean())) if sq.mean() > 0 else 0.0
 
 
+def voxel_volume_cm3(axes: list) -> float:
+    """The volume [cm^3] of one voxel of a grid with voxel centres ``axes`` (x, y, z [mm]; an axis of one voxel
+    counts 1 mm)."""
+    return float(np.prod([abs(a[1] - a[0]) if len(a) > 1 else 1.0 for a in axes])) / 1000.0
+
+
 def temperature_figures(T: np.ndarray, axes: list, hot_K: float, T_true: np.ndarray | None = None) -> dict:
     """What a combustion researcher reports of a temperature field ``T`` (nx, ny, nz) [K] on voxel centres ``axes``
     (x, y, z [mm]): its peak ``T_peak_K`` and where it lies ``T_peak_position_mm`` (x, y, z), and the flame's
     volume ``flame_volume_cm3``, the voxels above ``hot_K`` [K]; where a truth is known, the same of the truth
     (``_true``) and the peak's error ``T_peak_error_K`` (reconstructed less true; negative: too cold)."""
-    voxel_cm3 = float(np.prod([abs(a[1] - a[0]) if len(a) > 1 else 1.0 for a in axes])) / 1000.0
+    voxel_cm3 = voxel_volume_cm3(axes)
 
     def of(field: np.ndarray, suffix: str) -> dict:
         hottest = np.unravel_index(np.argmax(field), field.shape)
@@ -151,7 +157,7 @@ def reported_intervals(sigma: np.ndarray, sigma_std: np.ndarray, temperature, ax
     """
     from scipy.ndimage import gaussian_filter, minimum_filter
 
-    voxel_cm3 = float(np.prod([abs(a[1] - a[0]) if len(a) > 1 else 1.0 for a in axes])) / 1000.0
+    voxel_cm3 = voxel_volume_cm3(axes)
     std = np.asarray(sigma_std, dtype=np.float64)
     # a local peak (the lowest sigma of its 3 x 3 x 3 voxels) sharper than its surroundings: its unresolved part
     local_peak = sigma <= minimum_filter(sigma, size=3, mode="nearest")
