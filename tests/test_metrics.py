@@ -90,10 +90,10 @@ def test_the_intervals_of_the_peak_and_the_volume_hold_the_truth_as_often_as_the
     assert np.mean([w["flame_volume_in_interval"] for w in held[1.0]]) < 0.9  # a count of voxels: steps
 
 
-def test_the_peak_interval_of_a_flat_top_is_the_band_of_its_value_and_a_lone_spike_widens_it_on_the_hot_side():
-    """A plateau of sigma s0 over a box of voxels, domed by 1e-4 towards its centre (nothing finer than a voxel) with sigma_std u: the
-    peak's interval is [T(s0 + 2u), T(s0 - 2u)], the peak could lie anywhere on the plateau (the box of
-    its voxels, half a voxel out), and the volume interval counts the plateau alone. A one-voxel spike above it
+def test_the_peak_interval_of_a_flat_top_is_the_band_of_its_value_and_a_lone_spike_widens_it():
+    """A plateau of sigma s0 over a box of voxels, domed by 1e-4 towards its centre (nothing finer than a voxel),
+    with sigma_std u: the peak's interval is [T(s0 + 2u), T(s0 - 2u)], the peak could lie anywhere on the plateau
+    (the box of its voxels, half a voxel out), and the volume interval counts the plateau alone. A one-voxel spike above it
     (what a field cannot resolve: a sharp tip smoothed, or streaks crossing) moves both bounds further than 2u."""
     from nerif.geometry import ProbeBox
     from nerif.metrics import reported_intervals
