@@ -55,6 +55,11 @@ class NeuralField(nn.Module):
         nn.init.constant_(last.bias, math.atanh(-self.c / self.k))
         self.mlp = nn.Sequential(*layers, last)
 
+    @property
+    def finest_cell_mm(self) -> float:
+        """The field's finest cell [mm]: the longest box edge over the encoder's ``cells_across``."""
+        return 2.0 * self.box.scale_mm / float(self.encoder.cells_across)
+
     def network(self, p: torch.Tensor) -> torch.Tensor:
         """The ungated field, (N, 3) [mm] -> (N,)."""
         return self.k * torch.tanh(self.mlp(self.encoder(self.box.normalize(p)))[:, 0]) + self.c

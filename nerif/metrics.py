@@ -137,37 +137,55 @@ def temperature_figures(T: np.ndarray, axes: list, hot_K: float, T_true: np.ndar
     return out
 
 
+def resolved_peak_figures(peak, temperature, T_true_peak: Optional[float] = None) -> dict:
+    """The peak read through the run's resolution (``peak``: :class:`nerif.resolution.ResolvedPeak`; ``temperature``
+    maps sigma to T [K]): ``T_peak_K`` the corrected peak, ``T_peak_field_K`` the field's hottest voxel, what the
+    resolution took off it ``T_peak_resolution_K``, ``resolution_mm`` and ``T_peak_resolved`` (1: the core is
+    wider than the resolution, 0: about as fine, the corrected peak a lower bound); with ``T_true_peak`` [K] the
+    peak's error ``T_peak_error_K`` (reconstructed less true)."""
+    field, corrected = float(temperature(np.float64(peak.sigma_field))), float(temperature(np.float64(peak.sigma)))
+    out = {"T_peak_K": corrected, "T_peak_field_K": field, "T_peak_resolution_K": corrected - field,
+           "resolution_mm": peak.resolution_mm, "T_peak_resolved": float(peak.resolved)}
+    if T_true_peak is not None:
+        out["T_peak_error_K"] = corrected - float(T_true_peak)
+    return out
+
+
 def reported_intervals(sigma: np.ndarray, sigma_std: np.ndarray, temperature, axes: list, hot_K: float,
-                       hottest_sigma: float, z: float = 2.0) -> dict:
+                       hottest_sigma: float, z: float = 2.0, blur_vox: float = 1.0) -> dict:
     """Intervals of +- ``z`` standard deviations about the figures :func:`temperature_figures` reports, from the
     per-voxel standard deviation ``sigma_std`` of ``sigma`` (both (nx, ny, nz)) on voxel centres ``axes``
     (x, y, z [mm]); ``temperature`` maps sigma to T [K] (hot gas has the lower sigma), ``hottest_sigma`` is the
     lowest sigma the field may take (its prior's bound: no hotter bound is read).
 
-    - ``T_peak_interval_K`` [cold, hot]: the peak voxel's sigma moved by z sqrt(u^2 + b^2) either way, u its
-      standard deviation and b = G_1 sigma - sigma there (G_1 a Gaussian blur of one voxel): a peak finer than the
-      field resolves is uncertain by about its own difference from its surroundings, a sharp tip the views smooth
-      reading too cold (issue 59: the bunsen flame's 1861 K read 1533 K) as much as crossing streaks of a few views
-      read too hot; the members of an ensemble agree on either.
+    - ``T_peak_interval_K`` [cold, hot]: from the peak voxel's sigma moved colder by z sqrt(u^2 + b^2) to the
+      peak read through the run's resolution (``sigma - b``, :func:`nerif.resolution.resolved_peak`) moved hotter
+      by as much, u its standard deviation and b = G sigma - sigma there (G a Gaussian blur of ``blur_vox``
+      voxels, the run's resolution): a peak finer than the field resolves is uncertain by about its own difference
+      from its surroundings, a sharp tip the views smooth reading too cold (issue 59: the bunsen flame's 1861 K
+      read 1533 K) as much as crossing streaks of a few views read too hot; the members of an ensemble agree on
+      either.
     - ``T_peak_position_interval_mm`` [[lo, hi]] per axis: the box of the voxels that could be the hottest, those
       whose hot bound (z u, and z sqrt(u^2 + b^2) at a local peak: the hottest of its 3 x 3 x 3 voxels) reaches
       the peak's cold bound.
     - ``flame_volume_interval_cm3`` [least, most]: the voxels above ``hot_K`` with every voxel at its cold, then
       at its hot bound.
     """
-    from scipy.ndimage import gaussian_filter, minimum_filter
+    from scipy.ndimage import minimum_filter
+
+    from nerif.resolution import blur_deficit
 
     voxel_cm3 = voxel_volume_cm3(axes)
     std = np.asarray(sigma_std, dtype=np.float64)
     # a local peak (the lowest sigma of its 3 x 3 x 3 voxels) sharper than its surroundings: its unresolved part
     local_peak = sigma <= minimum_filter(sigma, size=3, mode="nearest")
-    unresolved = np.where(local_peak, np.maximum(gaussian_filter(sigma, 1.0, mode="nearest") - sigma, 0.0), 0.0)
+    unresolved = np.where(local_peak, np.maximum(blur_deficit(sigma, blur_vox), 0.0), 0.0)
     either = np.sqrt(std**2 + unresolved**2)
 
     def T(s):
         return temperature(np.maximum(s, hottest_sigma))
 
-    hot_bound = T(sigma - z * either)
+    hot_bound = T(sigma - unresolved - z * either)
     peak = np.unravel_index(np.argmax(T(sigma)), sigma.shape)
     cold_peak = float(T(sigma[peak] + z * either[peak]))
     could = hot_bound >= cold_peak

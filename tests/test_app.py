@@ -50,7 +50,10 @@ def test_a_run_writes_every_output(tmp_path):
     for f in ("reconstruction.vti", "slices.png", "profiles.png", "curves.png", "checkpoint.pt", ".hydra/config.yaml"):
         assert (out / f).is_file(), f
     assert {k for k, u in m["units"].items() if u == "?"} == set() and m["units"]["temperature_rmse_K"] == "K"
-    assert m["T_peak_true_K"] == pytest.approx(float(z["T_true"].max())) and m["T_peak_K"] == float(z["T"].max())
+    assert m["T_peak_true_K"] == pytest.approx(float(z["T_true"].max())) and m["T_peak_field_K"] == float(z["T"].max())
+    # issue 66: the reported peak is the field's read through the run's resolution, never colder than the field's
+    assert m["T_peak_K"] >= m["T_peak_field_K"] and m["resolution_mm"] > 0
+    assert m["T_peak_error_K"] == pytest.approx(m["T_peak_K"] - m["T_peak_true_K"])
     events = list((out / "tensorboard").glob("events.out.tfevents.*"))
     assert events
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
@@ -309,6 +312,9 @@ def test_the_summary_line_names_the_peak_temperature_the_true_one_and_the_flames
     m.update(T_peak_interval_K=[1446.2, 2806.4], flame_volume_interval_cm3=[10.14, 16.9])  # issue 59: intervals
     assert ("peak T 1542 K (2 std: 1446-2806) at (0.5, 31.5, -0.5) mm (true 1861 K, -319 K), 12.3 cm3 "
             "(2 std: 10.1-16.9) above 1000 K (true 15.1)") in summary_line(m, Path("out"))
+    m.update(T_peak_field_K=1433.0, resolution_mm=0.771)  # issue 66: the peak read through the run's resolution
+    assert "peak T 1542 K (2 std: 1446-2806) read through 0.77 mm of resolution (the field's 1433 K) at (0.5" in \
+        summary_line(m, Path("out"))
 
 
 def test_the_share_of_the_held_out_displacements_explained_falls_with_the_fit_and_leads_the_summary():

@@ -109,7 +109,8 @@ def test_the_peak_interval_of_a_flat_top_is_the_band_of_its_value_and_a_lone_spi
     std = np.full(box.shape, u)
     iv = reported_intervals(sigma, std, T_of, box.axes(), 1000.0, -1.05)
     top = sigma.min()  # the dome's centre
-    assert iv["T_peak_interval_K"] == pytest.approx([T_of(top + 2 * u), T_of(top - 2 * u)], rel=1e-6)
+    # the dome's curvature (1e-4 of its depth) moves the hot bound by its read-through-the-resolution part alone
+    assert iv["T_peak_interval_K"] == pytest.approx([T_of(top + 2 * u), T_of(top - 2 * u)], rel=1e-4)
     axes = box.axes()
     np.testing.assert_allclose(iv["T_peak_position_interval_mm"], [[axes[k][2] - 1, axes[k][13] + 1] for k in range(3)])
     assert iv["flame_volume_interval_cm3"] == pytest.approx([1728 * 8e-3, 1728 * 8e-3])
@@ -122,3 +123,29 @@ def test_the_peak_interval_of_a_flat_top_is_the_band_of_its_value_and_a_lone_spi
         assert lo <= a[7] <= hi
     clipped = reported_intervals(sigma, np.full(box.shape, 1.0), T_of, box.axes(), 1000.0, -1.05)
     assert clipped["T_peak_interval_K"][1] == pytest.approx(T_of(-1.05))  # no hotter than the prior allows
+
+
+def test_a_blurred_cores_peak_read_through_the_resolution_is_closer_and_its_interval_holds_the_truth():
+    """Issue 66: a Gaussian core (3 voxels) at 1850 K blurred by the run's resolution (0.8 voxel) reads cold in the
+    field (1222 K: at 1850 K a 1 % error of sigma is 5 % of T); read back through that resolution
+    (:func:`resolved_peak_figures`) it keeps under a quarter of that error (the first order's rest), and the interval
+    about it holds the truth."""
+    from scipy.ndimage import gaussian_filter
+
+    from nerif.geometry import ProbeBox
+    from nerif.metrics import reported_intervals, resolved_peak_figures
+    from nerif.physics import Ambient
+    from nerif.resolution import resolved_peak
+
+    amb = Ambient(T0=296.15, n0=1.00027, T_max=2000.0)
+    box = ProbeBox((31, 31, 31), 1.0)
+    g = np.meshgrid(*[np.arange(31) - 15] * 3, indexing="ij")
+    truth = float(amb.sigma_from_temperature(1850.0)) * np.exp(-sum(x**2 for x in g) / (2 * 3.0**2))
+    field = gaussian_filter(truth, 0.8, mode="nearest")
+    f = resolved_peak_figures(resolved_peak(field, 0.8, 1.0, -1.05), amb.temperature_from_sigma, 1850.0)
+    assert f["T_peak_field_K"] < 0.8 * 1850.0 and abs(f["T_peak_K"] - 1850.0) < 0.25 * (1850.0 - f["T_peak_field_K"])
+    assert f["T_peak_resolution_K"] == pytest.approx(f["T_peak_K"] - f["T_peak_field_K"]) and f["T_peak_resolved"] == 1
+    assert f["T_peak_error_K"] == pytest.approx(f["T_peak_K"] - 1850.0)
+    iv = reported_intervals(field, np.full(box.shape, 0.005), amb.temperature_from_sigma, box.axes(), 1000.0, -1.05,
+                            blur_vox=0.8)
+    assert iv["T_peak_interval_K"][0] < 1850.0 < iv["T_peak_interval_K"][1]

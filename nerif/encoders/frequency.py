@@ -22,6 +22,7 @@ class Frequency(nn.Module):
         self.include_input = include_input
         self.register_buffer("freqs", (2.0 ** torch.arange(n_octaves)) * math.pi, persistent=False)
         self.out_dim = 3 * (2 * n_octaves + int(include_input))
+        self.cells_across = 2**n_octaves  # half-periods of the finest octave across the network's [-1, 1]
 
     @staticmethod
     def features(encoder) -> int:

@@ -114,6 +114,7 @@ class HashGrid(nn.Module):
         self.interpolation = interpolation
         self.n_levels, self.n_features = n_levels, n_features
         self.out_dim = n_levels * n_features
+        self.cells_across = max_resolution  # the finest level's cells across the network's [-1, 1]
         growth = math.exp((math.log(max_resolution) - math.log(base_resolution)) / max(n_levels - 1, 1))
         res = [int(math.floor(base_resolution * growth**l + 1e-6)) for l in range(n_levels)]
         table = 2**log2_table_size

@@ -10,6 +10,7 @@ class Identity(nn.Module):
     """No encoding: the MLP sees the coordinates themselves. (N, 3) -> (N, 3)."""
 
     out_dim = 3
+    cells_across = 1  # the MLP alone: no structure finer than the box is encoded
 
     @staticmethod
     def features(encoder) -> int:

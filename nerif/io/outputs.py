@@ -18,7 +18,9 @@ import torch
 import nerif.io.plots as plots
 from nerif.cache import cached_arrays, content_digest, source_digest
 from nerif.export import atomic_write, to_uint8, write_npz, write_png, write_vti
-from nerif.metrics import reported_intervals, temperature_figures, uncertainty_scores, within_intervals
+from nerif.metrics import (reported_intervals, resolved_peak_figures, temperature_figures, uncertainty_scores,
+                           within_intervals)
+from nerif.resolution import effective_resolution_mm, resolved_peak
 from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
                              profiles_figure, save_figure, sensing_figure, slice_figure)
 from nerif.units import SHARE, SIGMA, VOLUMES, declare
@@ -29,7 +31,11 @@ INSIDE = "1 (1: the true figure lies in its interval, 0: it does not)"
 declare(T_peak_interval_K="K (the peak's 2-standard-deviation interval: [cold, hot])",
         T_peak_position_interval_mm="mm (per axis [lo, hi]: the box of the voxels that could be the hottest)",
         flame_volume_interval_cm3="cm^3 (the flame volume's 2-standard-deviation interval: [least, most])",
-        T_peak_in_interval=INSIDE, T_peak_position_in_interval=INSIDE, flame_volume_in_interval=INSIDE)
+        T_peak_in_interval=INSIDE, T_peak_position_in_interval=INSIDE, flame_volume_in_interval=INSIDE,
+        T_peak_field_K="K (the field's hottest voxel, before the resolution's correction)",
+        T_peak_resolution_K="K (what the run's resolution took off the peak: T_peak_K - T_peak_field_K)",
+        resolution_mm="mm (standard deviation of the Gaussian blur of the field's finest cell and the rays' spacing)",
+        T_peak_resolved="1 (1: the hot core is wider than the resolution; 0: about as fine, T_peak_K a lower bound)")
 declare(uncertainty_coverage_1sigma=SHARE, uncertainty_coverage_2sigma=SHARE, uncertainty_coverage_2sigma_core=SHARE,
         uncertainty_spearman="1 (rank correlation)",
         uncertainty_ause="1 (area under the sparsification error, of sigma)",
@@ -204,14 +210,21 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float,
     final["ray_binning"] = int(scene.cameras[0].binning)  # sensor pixels across a ray
     final.update(solver.report)
     final.update(solver.saturation(sigma, failed))
+    lowest = solver.interval[0] if hasattr(solver, "interval") else float(sigma.min())
+    resolution = effective_resolution_mm(solver.cell_mm, scene.ray_spacing_mm)
     if amb.temperature_known:
         final.update(temperature_figures(vols["T"], box.axes(), flame_above_K, scene.truth_T))
+        peak = resolved_peak(sigma, resolution, box.voxel_mm, lowest, correct=scene.displacements is not None)
+        final.update(resolved_peak_figures(peak, amb.temperature_from_sigma, final.get("T_peak_true_K")))
+        if not peak.resolved:
+            said = unresolved_words(final)
+            log.warning("%s", said)
+            final["warnings"] = [*final.get("warnings", []), said]
     if "sigma_std" in vols:
         final.update(uncertainty_report(vols, scene))
         if amb.temperature_known:
-            lowest = solver.interval[0] if hasattr(solver, "interval") else float(sigma.min())
             final.update(reported_intervals(sigma, vols["sigma_std"], amb.temperature_from_sigma, box.axes(),
-                                            flame_above_K, lowest))
+                                            flame_above_K, lowest, blur_vox=resolution / box.voxel_mm))
             final.update(within_intervals(final))
     if scene.sensing is not None:
         final.update(scene.sensing.report())
@@ -243,12 +256,22 @@ def measurement_report(scene, refined: Optional[torch.Tensor] = None) -> dict:
     return {"measurement": per_view, **({"shake_px_max": max(shakes)} if shakes else {})}
 
 
+def unresolved_words(m: dict) -> str:
+    """The sentence for a hot core about as fine as the run resolves (:mod:`nerif.resolution`)."""
+    return (f"the hottest core is about as fine as this run resolves ({m['resolution_mm']:.2f} mm, from the field's "
+            f"finest cell and the rays' spacing), or a spike where streaks of a few views cross: its peak, "
+            f"{m['T_peak_K']:.0f} K as the field reads it, cannot be read more closely (a core that fine reads cold); "
+            "finer rays (data.binning) or a finer field (field.finest_resolution) resolve it where the data carry it")
+
+
 def temperature_words(m: dict) -> str:
     """The summary line's temperatures: the peak (+- one standard deviation where estimated) and where it is, the
     true peak and the peak's error where a truth is known, and the flame's volume."""
     std = f" +- {m['T_std_at_peak_K']:.0f} K" if m.get("T_std_at_peak_K") is not None else " K"
     if m.get("T_peak_interval_K") is not None:  # the peak's own interval (nerif.metrics.reported_intervals)
         std = " K (2 std: {:.0f}-{:.0f})".format(*m["T_peak_interval_K"])
+    if m.get("T_peak_field_K") is not None and m.get("resolution_mm") is not None:
+        std = f"{std} read through {m['resolution_mm']:.2f} mm of resolution (the field's {m['T_peak_field_K']:.0f} K)"
     where = m.get("T_peak_position_mm")
     at = f" at ({', '.join(f'{c:.1f}' for c in where)}) mm" if isinstance(where, list) else ""
     true = (f" (true {m['T_peak_true_K']:.0f} K, {m['T_peak_error_K']:+.0f} K)"

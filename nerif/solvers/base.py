@@ -220,6 +220,12 @@ class IterativeSolver:
         raise NotImplementedError
 
     @property
+    def cell_mm(self) -> float:
+        """The finest cell [mm] the solver's field has: a voxel of the probe grid here (a voxel solver), the
+        encoder's finest cell for a neural field; it sets the run's resolution (:mod:`nerif.resolution`)."""
+        return float(self.scene.box.voxel_mm)
+
+    @property
     def added(self) -> dict[str, np.ndarray]:
         """Volumes estimated about the result after training (an uncertainty: :mod:`nerif.solvers.uncertainty`),
         shown with it by :meth:`volumes`."""

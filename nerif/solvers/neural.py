@@ -251,6 +251,10 @@ class NeuralSolver(IterativeSolver):
         """The field that evaluations and outputs use (:attr:`Optimisation.estimate`)."""
         return self.optimisation.estimate
 
+    @property
+    def cell_mm(self) -> float:
+        return self.field.finest_cell_mm
+
     def reconstruction(self) -> np.ndarray:
         """sigma on the scene's probe grid, (nx, ny, nz)."""
         return self.estimate.on_grid(self.scene.box).cpu().numpy().astype(np.float64)
