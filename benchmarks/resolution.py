@@ -3,7 +3,7 @@ the run's resolution (:mod:`nerif.resolution`) gives back (issue 66).
 
 A Gaussian core in refractive index (``phantom=gaussian_blob``, standard deviation ``--widths`` mm, 1800 K at its
 centre, on a voxel centre) on the shared captures' grid (60 x 100 x 60 voxels of 1 mm) seen by their rig (9 cameras
-over 160 degrees, 360 x 640 px of 40 um, rays 4 px apart: 1.06 mm at the probe), each through the ideal chain (thin
+over 160 degrees, 360 x 640 px of 40 um, rays 4 px apart: 1.14 mm at the probe, the cameras focused on the background), each through the ideal chain (thin
 rays, exact deflections) and the realistic one (aperture blur, a rendered background, 1 % noise, optical flow, the
 images' term), every other setting the default:
 

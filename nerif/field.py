@@ -57,8 +57,10 @@ class NeuralField(nn.Module):
 
     @property
     def finest_cell_mm(self) -> float:
-        """The field's finest cell [mm]: the longest box edge over the encoder's ``cells_across``."""
-        return 2.0 * self.box.scale_mm / float(self.encoder.cells_across)
+        """The field's finest cell [mm]: the longest box edge over the encoder's ``cells_across``; a voxel of the
+        probe grid for an encoder that does not declare it (a new encoder still runs to its results)."""
+        cells = getattr(self.encoder, "cells_across", None)
+        return 2.0 * self.box.scale_mm / float(cells) if cells else float(self.box.voxel_mm)
 
     def network(self, p: torch.Tensor) -> torch.Tensor:
         """The ungated field, (N, 3) [mm] -> (N,)."""

@@ -141,7 +141,7 @@ def resolved_peak_figures(peak, temperature, T_true_peak: Optional[float] = None
     """The peak read through the run's resolution (``peak``: :class:`nerif.resolution.ResolvedPeak`; ``temperature``
     maps sigma to T [K]): ``T_peak_K`` the corrected peak, ``T_peak_field_K`` the field's hottest voxel, what the
     resolution took off it ``T_peak_resolution_K``, ``resolution_mm`` and ``T_peak_resolved`` (1: the core is
-    wider than the resolution, 0: about as fine, the corrected peak a lower bound); with ``T_true_peak`` [K] the
+    wider than the resolution, 0: about as fine, the field's own peak kept); with ``T_true_peak`` [K] the
     peak's error ``T_peak_error_K`` (reconstructed less true)."""
     field, corrected = float(temperature(np.float64(peak.sigma_field))), float(temperature(np.float64(peak.sigma)))
     out = {"T_peak_K": corrected, "T_peak_field_K": field, "T_peak_resolution_K": corrected - field,

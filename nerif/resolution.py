@@ -7,7 +7,7 @@ together they blur the true field by about a Gaussian of
 
     s = sqrt(cell_field^2 + cell_rays^2) / sqrt(6)                     [mm]  (:func:`effective_resolution_mm`)
 
-(0.77 mm on the shared 1 mm captures: a 1.56 mm hash cell, rays 1.06 mm apart). A hot core not much wider than ``s``
+(0.79 mm on the shared 1 mm captures: a 1.56 mm hash cell, rays 1.14 mm apart). A hot core not much wider than ``s``
 reads cold: blurring a flame's truth by 0.8 mm takes its 1861 K peak to 1570 K, and its temperature falls faster
 than sigma near the peak (``dT / T = -d(T0 / T) / (T0 / T)``: at 1860 K a 1 % error of sigma is 5 % of T).
 
@@ -21,6 +21,7 @@ longer holds: the field's own peak is reported, and that it cannot be read more 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import numpy as np
 
 TENT = 1.0 / np.sqrt(6.0)  # the standard deviation of a linear interpolation's tent, in cells
@@ -30,15 +31,9 @@ FLAME = 0.05  # a peak of sigma above -FLAME is no flame (the flame's voxels, ne
 
 def effective_resolution_mm(cell_mm: float, ray_spacing_mm: float) -> float:
     """The standard deviation [mm] of the Gaussian blur a run puts on the true field: the tents of the field's
-    finest cell ``cell_mm`` and of the rays' spacing at the probe ``ray_spacing_mm`` (both [mm]) combined."""
+    finest cell ``cell_mm`` and of the rays' spacing at the probe ``ray_spacing_mm`` (both [mm];
+    :func:`nerif.geometry.ray_spacing_mm`) combined."""
     return float(np.hypot(cell_mm, ray_spacing_mm) * TENT)
-
-
-def ray_spacing_mm(voxel_mm: float, rays_per_voxel: float) -> float:
-    """The distance [mm] between neighbouring rays at the probe centre: a voxel of ``voxel_mm`` over the rays one
-    voxel spans there (``rays_per_voxel``: :func:`nerif.geometry.pixels_per_voxel` of the cameras as the rays read
-    them, binned); one voxel where that is unknown (no camera faces the probe)."""
-    return float(voxel_mm) / rays_per_voxel if rays_per_voxel > 0 else float(voxel_mm)
 
 
 @dataclass(frozen=True)

@@ -55,3 +55,19 @@ def test_the_network_is_not_evaluated_where_the_3d_mask_is_zero():
     p = torch.as_tensor(scene.box.centres().reshape(-1, 3), dtype=torch.float32)
     s = field(p)
     assert seen[0] < 0.6 * len(p) and s[torch.as_tensor(~masks.volume.reshape(-1))].abs().max() == 0
+
+
+def test_the_fields_finest_cell_is_the_longest_edge_over_the_encoders_cells():
+    """Issue 66: a hash of 64 cells across a 30 mm box has 0.47 mm cells, 6 octaves 30 / 64 mm, no encoding the box;
+    an encoder that declares no ``cells_across`` (a user's new one) counts a voxel, and the run goes on."""
+    assert NeuralField(ENCODERS.build(SMALL_HASH), BOX).finest_cell_mm == pytest.approx(30 / 64)
+    assert NeuralField(ENCODERS.build({"name": "frequency"}), BOX).finest_cell_mm == pytest.approx(30 / 64)
+    assert NeuralField(ENCODERS.build({"name": "none"}), BOX).finest_cell_mm == pytest.approx(30.0)
+
+    class Plain(torch.nn.Module):
+        out_dim = 3
+
+        def forward(self, x):
+            return x
+
+    assert NeuralField(Plain(), BOX).finest_cell_mm == BOX.voxel_mm

@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from nerif.resolution import (TENT, UNRESOLVED, blur_deficit, effective_resolution_mm, ray_spacing_mm,
-                              resolved_peak)
+from nerif.resolution import TENT, UNRESOLVED, blur_deficit, effective_resolution_mm, resolved_peak
 
 
 def _core(widths_vox, amplitude=-0.9, shape=(41, 41, 41), pedestal=0.0):
@@ -21,8 +20,18 @@ def test_the_resolution_is_the_tents_of_the_fields_cell_and_the_rays_spacing():
     assert TENT == pytest.approx(1 / np.sqrt(6))
     assert effective_resolution_mm(1.5625, 0.0) == pytest.approx(1.5625 / np.sqrt(6))
     assert effective_resolution_mm(3.0, 4.0) == pytest.approx(5.0 / np.sqrt(6))
-    assert ray_spacing_mm(2.0, 4.0) == 0.5  # four rays across a 2 mm voxel
-    assert ray_spacing_mm(2.0, 0.0) == 2.0  # no camera faces the probe: a voxel
+    from nerif.geometry import ProbeBox, ray_spacing_mm
+
+    class Seen:  # a camera whose rays (binned pixels) are 2 to the mm at the probe centre, or that faces away
+        def __init__(self, per_mm):
+            self.per_mm = per_mm
+
+        def pixels_per_mm(self, point):
+            return self.per_mm
+
+    box = ProbeBox((4, 4, 4), 2.0)
+    assert ray_spacing_mm([Seen(2.0)], box) == 0.5  # four rays across a 2 mm voxel
+    assert ray_spacing_mm([Seen(-2.0)], box) == 2.0  # no camera faces the probe: a voxel
 
 
 @pytest.mark.parametrize("widths, d", [((4.0, 4.0, 4.0), 3), ((3.0, np.inf, 3.0), 2), ((5.0, 8.0, np.inf), 2)])

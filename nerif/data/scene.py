@@ -12,10 +12,9 @@ from typing import Optional
 import numpy as np
 import torch
 
-from nerif.geometry import Camera, ProbeBox, pixels_per_voxel, rays_in_box, view_index
+from nerif.geometry import Camera, ProbeBox, ray_spacing_mm, rays_in_box, view_index
 from nerif.physics import Ambient
 from nerif.registry import Registry
-from nerif.resolution import ray_spacing_mm
 from nerif.renderers.deflection import perpendicular
 from nerif.sensing.findings import Findings
 from nerif.sensing.displacement import displacement_matrix, displacement_to_deflection
@@ -192,8 +191,8 @@ class Scene:
 
     @property
     def ray_spacing_mm(self) -> float:
-        """The distance [mm] between neighbouring rays at the probe centre (:func:`nerif.resolution.ray_spacing_mm`)."""
-        return ray_spacing_mm(self.box.voxel_mm, pixels_per_voxel(self.cameras, self.box))
+        """The distance [mm] between neighbouring rays at the probe centre (:func:`nerif.geometry.ray_spacing_mm`)."""
+        return ray_spacing_mm(self.cameras, self.box)
 
     @property
     def n_views(self) -> int:

@@ -67,6 +67,14 @@ def pixels_per_voxel(cameras: list[Camera], box: ProbeBox) -> float:
     return float(np.median(scale)) * box.voxel_mm if scale else 0.0
 
 
+def ray_spacing_mm(cameras: list[Camera], box: ProbeBox) -> float:
+    """The distance [mm] between neighbouring rays at the probe centre: a voxel of ``box`` over the pixels of
+    ``cameras`` as the rays read them (binned) one voxel spans there (:func:`pixels_per_voxel`); one voxel where no
+    camera faces the probe."""
+    per_voxel = pixels_per_voxel(cameras, box)
+    return float(box.voxel_mm) / per_voxel if per_voxel > 0 else float(box.voxel_mm)
+
+
 def ray_binning(cameras: list[Camera], box: ProbeBox) -> int:
     """The binning that puts about one ray per voxel across at the probe centre: the common divisor b of every
     camera's width and height nearest (in ratio) to :func:`pixels_per_voxel`. Finer rays than the voxels only

@@ -35,7 +35,7 @@ declare(T_peak_interval_K="K (the peak's 2-standard-deviation interval: [cold, h
         T_peak_field_K="K (the field's hottest voxel, before the resolution's correction)",
         T_peak_resolution_K="K (what the run's resolution took off the peak: T_peak_K - T_peak_field_K)",
         resolution_mm="mm (standard deviation of the Gaussian blur of the field's finest cell and the rays' spacing)",
-        T_peak_resolved="1 (1: the hot core is wider than the resolution; 0: about as fine, T_peak_K a lower bound)")
+        T_peak_resolved="1 (1: the hot core is wider than the resolution; 0: about as fine, T_peak_K the field's own)")
 declare(uncertainty_coverage_1sigma=SHARE, uncertainty_coverage_2sigma=SHARE, uncertainty_coverage_2sigma_core=SHARE,
         uncertainty_spearman="1 (rank correlation)",
         uncertainty_ause="1 (area under the sparsification error, of sigma)",
