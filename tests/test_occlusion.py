@@ -77,3 +77,82 @@ def test_a_uniformly_random_pattern_has_no_occluder_whatever_its_gaps_and_a_moun
     img[300:, 150:210] = 0.0
     hidden = occluded(img)
     assert hidden[305:, 155:205].all() and not hidden[:250].any()
+
+
+def wind_tunnel(img: np.ndarray) -> tuple[np.ndarray, dict]:
+    """``img`` (H, W) with a dark model (an ellipse), its sting (a vertical rod 11 px wide), a burner tube and an
+    out-of-focus band (the pattern blurred by 6 px) on it, and 1 % of sensor noise; each object's pixels."""
+    import cv2
+
+    H, W = img.shape
+    yy, xx = np.mgrid[0:H, 0:W]
+    where = {"model": ((yy - 0.4 * H) / (0.08 * H)) ** 2 + ((xx - 0.45 * W) / (0.2 * W)) ** 2 <= 1,
+             "sting": (abs(xx - 0.45 * W) <= 5) & (yy >= 0.45 * H),
+             "burner": (abs(xx - 0.75 * W) <= 0.06 * W) & (yy >= 0.8 * H),
+             "band": (xx >= 0.05 * W) & (xx < 0.18 * W)}
+    out = np.where(where["band"], cv2.GaussianBlur(np.float32(img), (0, 0), 6.0), img)
+    for k in ("model", "sting", "burner"):
+        out = np.where(where[k], 0.06 + 0.03 * xx / W, out)
+    noise = np.random.default_rng(8).normal(0.0, 0.01, out.shape)
+    return np.clip(out + noise, 0, 1).astype(np.float32), where
+
+
+GRID = {"name": "dot_grid", "pitch_px": 12.0, "radius_px": 3.0}
+RANDOM = {"name": "random_dots", "density": 0.03, "radius_px": 2.0}
+
+
+@pytest.mark.parametrize("spec", [RANDOM, {"name": "random_dots", "density": 0.02, "radius_px": 1.0},
+                                  {"name": "random_dots", "density": 0.1, "radius_px": 2.5}, {"name": "poisson_disk"},
+                                  GRID, {"name": "dot_grid", "pitch_px": 24.0, "radius_px": 4.0}])
+def test_a_model_a_burner_and_a_blurred_band_are_found_on_every_pattern_and_the_pattern_is_kept(spec):
+    """Issue 70: a bar read from the 95th percentile of a view's textureless areas was set by the objects
+    themselves where the view held 20-100 areas (on dots 0.03 a px, 2 px across: the model, the burner and the band
+    all missed; a real wind tunnel's model on a dot grid 0.84 -> 0.025 left out). Read from the median and the
+    upper quartile: found on every density and on regular grids, and at most 0.5 % of the pattern taken away from
+    them (the sparse pattern's gaps that touch an object go with it)."""
+    from scipy import ndimage
+
+    H = W = 504
+    img = PATTERNS.build(spec, height=H, width=W, seed=1)
+    img = diffraction_blur(torch.as_tensor(np.float32(img)), 1.5).numpy()
+    assert not occluded(img).any()
+    dirty, where = wind_tunnel(img)
+    hidden = occluded(dirty)
+    for k in ("model", "burner", "band"):
+        assert hidden[where[k]].mean() >= 0.95, (k, hidden[where[k]].mean())
+    near = ndimage.binary_dilation(np.any(list(where.values()), axis=0), iterations=25)
+    assert hidden[~near].mean() < 0.005
+
+
+def test_a_regular_grid_cut_by_the_frame_is_not_an_occluder():
+    """A grid whose period does not divide the frame shows a strip of wider gaps along the edge (the cells the
+    frame cuts): read as wide as it is, not twice (the edge is an edge of the area), it is not an occluder (8 % of
+    a 512 px frame of dots 24 px apart was taken)."""
+    img = PATTERNS.build({"name": "dot_grid", "pitch_px": 24.0, "radius_px": 4.0}, height=512, width=512, seed=1)
+    img = diffraction_blur(torch.as_tensor(img), 1.5).numpy()
+    assert not occluded(img).any()
+
+
+@pytest.mark.parametrize("grid", [True, False])
+def test_the_measurement_stage_leaves_a_model_out_and_keeps_the_rest(grid):
+    """Issue 70, as a user meets it: :func:`~nerif.sensing.measurement.measure_view` with the flow and rays of 8 x 8 px
+    on a pair whose background is a dot grid (or random dots, 0.03 a px) and whose view holds a model, its sting
+    and a blurred band: at least 70 % of their rays left out as occluded (0.025 on a real wind tunnel's pair
+    before), at least 99 % of the rays two rays or more from them kept (the margin of 3 texture widths reaches one
+    ray beyond an object's edge)."""
+    from scipy import ndimage
+
+    from nerif.sensing.measurement import CAUSES, measure_view
+
+    ref = PATTERNS.build(GRID if grid else RANDOM, height=504, width=504, seed=1)
+    ref = diffraction_blur(torch.as_tensor(np.float32(ref)), 1.5).numpy()
+    ref, where = wind_tunnel(ref)
+    dist = np.roll(ref, 1, axis=1)  # a uniform shift of one pixel: nothing else changes
+    m = measure_view(dist, ref, {"name": "farneback"}, (63, 63), shake=False)
+    objects = np.any(list(where.values()), axis=0).reshape(63, 8, 63, 8).mean(axis=(1, 3)) > 0.5
+    touched = np.any(list(where.values()), axis=0).reshape(63, 8, 63, 8).any(axis=(1, 3))
+    away = ~ndimage.binary_dilation(touched, iterations=2)
+    away[:, :2] = away[:, -2:] = False  # the shifted column at the frame's edge
+    left_out = m.left_out == CAUSES.index("occluded")
+    assert left_out[objects].mean() >= 0.7, left_out[objects].mean()
+    assert m.valid[away].mean() >= 0.99, m.valid[away].mean()

@@ -26,7 +26,7 @@ from nerif.sensing.imaging import enlarged, resample, shrunk
 from nerif.sensing.noise import MIN_PIXELS, residual_noise
 from nerif.sensing.occlusion import local_contrast, occluded
 from nerif.sensing.saturation import TOP, saturated
-from nerif.sensing.shake import MIN_QUIET, rigid_shift
+from nerif.sensing.shake import MIN_QUIET, photometric_shift, rigid_shift
 from nerif.sensing.texture import shrink_factor, texture_scale_px, texture_width
 from nerif.sensing.vectors import median_test
 
@@ -71,14 +71,18 @@ def _on_grid(mask: np.ndarray, h: int, w: int) -> np.ndarray:
 
 
 def noise_of(distorted: np.ndarray, reference: np.ndarray, u_image: np.ndarray, valid: np.ndarray,
-             quiet: Optional[np.ndarray], width_px: float) -> Optional[float]:
+             quiet: Optional[np.ndarray], width_px: float, shake_px: Optional[np.ndarray] = None) -> Optional[float]:
     """The images' noise [share of full scale] (:func:`~nerif.sensing.noise.residual_noise`) on the usable pixels
-    that see no flame (``quiet``), or on every usable pixel where too few do; ``valid``, ``quiet``: (h, w) bool on
-    the ray grid, ``u_image`` (H, W, 2) the flow on the images' grid, the shake included."""
+    that see no flame (``quiet``), the images compared through the shake they hold there (``shake_px`` (2,)
+    [image px], :func:`~nerif.sensing.shake.photometric_shift`; None: through the flow), or on every usable pixel
+    through the flow where too few see no flame; ``valid``, ``quiet``: (h, w) bool on the ray grid, ``u_image``
+    (H, W, 2) the flow on the images' grid, the shake included."""
     H, W = reference.shape
     where = valid & quiet if quiet is not None else valid
     if int(where.sum()) * (H * W) < MIN_PIXELS * where.size:
         where = valid
+    elif shake_px is not None and quiet is not None:  # the flow reads the shake with its own gain
+        u_image = np.broadcast_to(np.float32(shake_px), u_image.shape)
     return residual_noise(distorted, reference, u_image, enlarged(where, H, W), width_px)
 
 
@@ -163,7 +167,9 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     u = resample(u_image, h, w).astype(np.float32) * np.float32(image_binning)  # px of the full sensor
     found["unmeasured"] = kept.drop(~np.isfinite(u).all(-1), "unmeasured")
     s = _take_off_shake(u, kept.valid, quiet, name) if shake else np.zeros(2)
-    found["shake_px"] = [float(s[0]), float(s[1])]
+    held = _images_shake(distorted, reference, kept.valid, quiet, s / image_binning, f * width) * image_binning \
+        if shake else s
+    found.update(shake_px=[float(s[0]), float(s[1])], shake_images_px=[float(held[0]), float(held[1])])
     found["rejected"] = kept.drop(median_test(u, kept.valid, median_threshold, median_eps_px)
                                   if median_threshold else None, "rejected")
     valid = kept.valid
@@ -171,7 +177,8 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
     peak = float(np.linalg.norm(u[valid], axis=-1).max()) if valid.any() else 0.0
     found.update(displacement_max_px=peak, valid_fraction=float(valid.mean()),
                  outside_px=outside_reach(u, valid, quiet),
-                 noise=noise_of(distorted, reference, u_image, valid, quiet, f * width))
+                 noise=noise_of(distorted, reference, u_image, valid, quiet, f * width,
+                                held / image_binning if shake else None))
     findings = Findings(**found)
     say(findings, name, region)
     return ViewMeasurement(u, valid, findings, distorted, u_image if keep_flow else None, kept.cause)
@@ -195,6 +202,18 @@ def _take_off_shake(u: np.ndarray, valid: np.ndarray, quiet: Optional[np.ndarray
     u -= s.astype(np.float32)
     log.debug("%s: shake read %s", name, where)
     return s
+
+
+def _images_shake(distorted: np.ndarray, reference: np.ndarray, valid: np.ndarray, quiet: Optional[np.ndarray],
+                  start_px: np.ndarray, width_px: float) -> np.ndarray:
+    """The shake [image px] (2,) the images (H, W) hold (:func:`~nerif.sensing.shake.photometric_shift`), read on
+    the usable pixels that see no flame (``valid``, ``quiet``: (h, w) bool on the ray grid) from the flow's reading
+    ``start_px``; that reading where too few pixels see no flame (it was read on the view's bulk, whose images hold
+    the flame's displacements too)."""
+    if quiet is None or int((quiet & valid).sum()) < MIN_QUIET:
+        return np.asarray(start_px, dtype=np.float64)
+    H, W = reference.shape
+    return photometric_shift(distorted, reference, enlarged(quiet & valid, H, W), start_px, width_px)
 
 
 def _flow(flow: dict, distorted: np.ndarray, small: np.ndarray, f: int, width: float) -> tuple[np.ndarray, object]:

@@ -80,6 +80,17 @@ def random_dots(height: int, width: int, seed: int = 0, samples: int = 1, densit
     return render_dots(height, width, rng.random((n, 2)) * [height, width], radius_px, samples)
 
 
+@PATTERNS.register("dot_grid")
+def dot_grid(height: int, width: int, seed: int = 0, samples: int = 1, pitch_px: float = 8.0,
+             radius_px: float = 2.0) -> np.ndarray:
+    """Dots of ``radius_px`` on a regular square grid ``pitch_px`` apart, as wind tunnels print them: a pattern
+    without gaps, every patch between the dots alike; the grid's phase drawn under ``seed``."""
+    rng = np.random.default_rng(seed)
+    rows, cols = (np.arange(-1.0, n / pitch_px + 1.0) * pitch_px + rng.random() * pitch_px for n in (height, width))
+    r, c = np.meshgrid(rows, cols, indexing="ij")
+    return render_dots(height, width, np.stack([r.ravel(), c.ravel()], -1), radius_px, samples)
+
+
 @PATTERNS.register("wavelet_noise")
 def wavelet_noise(height: int, width: int, seed: int = 0, samples: int = 1, scale_px: float = 2.0) -> np.ndarray:
     """Band-limited noise (Cook & DeRose wavelet noise): white noise minus its low-pass, at a feature size of
