@@ -2,6 +2,7 @@
 
     python benchmarks/flows.py                        # every estimator on every capture with a true_disp.npz
     python benchmarks/flows.py --views 0 4            # some views (all by default)
+    python benchmarks/flows.py --captures family-103  # some captures (the family's members included)
 
 Each estimator measures every view through the measurement stage (``nerif.sensing.measurement``, as a run does:
 saturation, occlusion, the shake taken off, outliers rejected) on the capture's auto ray grid. Its displacements
@@ -28,7 +29,7 @@ from ablation import write_report  # noqa: E402
 from nerif.data.capture import rig_geometry  # noqa: E402
 from nerif.data.capture_images import capture_files, read_exposures  # noqa: E402
 from nerif.data.rig_file import read_rig  # noqa: E402
-from nerif.data.scene import outside_the_box  # noqa: E402
+from nerif.geometry import outside_the_box  # noqa: E402
 from nerif.sensing.imaging import resample  # noqa: E402
 from nerif.sensing.measurement import MEASUREMENT  # noqa: E402
 
@@ -61,7 +62,7 @@ def capture_rows(root: Path, views: list[int] | None) -> list[dict]:
         truth = truth - exact["shake"][:, :, None, None]
     full, cameras, roi, rays = rig_geometry(rig, "auto", "cpu")
     distorted, references = capture_files(rig)
-    quiet = outside_the_box(cameras, rays)
+    quiet = outside_the_box(cameras, rays[2], rays[3])
     rows = []
     for v in views if views is not None else range(rig.n_views):
         (d,), _ = read_exposures([distorted[v]], rig.sensor_px)
@@ -94,9 +95,12 @@ def report(rows: list[dict]) -> str:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--views", nargs="+", type=int, default=None, help="views to measure (all by default)")
+    ap.add_argument("--captures", nargs="+", default=None,
+                    help="folder names under the shared data (default: every capture with a true_disp.npz)")
     ap.add_argument("--out", default="benchmarks/results/flows", help="output folder")
     args = ap.parse_args(argv)
-    roots = sorted(p.parent for p in DATA.glob("*/true_disp.npz"))
+    roots = sorted(p.parent for p in [*DATA.glob("*/true_disp.npz"), *DATA.glob("*/*/true_disp.npz")]
+                   if args.captures is None or p.parent.name in args.captures)
     if not roots:
         sys.exit(f"no capture with a true_disp.npz under {DATA}")
     rows = [row for root in roots for row in capture_rows(root, args.views)]

@@ -15,9 +15,9 @@ from omegaconf import DictConfig
 
 from nerif.configs import group
 from nerif.data import DATASETS
-from nerif.data.diagnostics import check_sign, ill_posed
+from nerif.data.diagnostics import check_sign, ill_posed, missing_wedge
 from nerif.export import write_json
-from nerif.io.outputs import RESULTS, summary_line, volume_slices, write_masks, write_outputs, write_sensing
+from nerif.io.outputs import RESULTS, summary_line, volume_slices, write_masks, write_outputs, write_rig, write_sensing
 from nerif.masks import MASKS
 from nerif.sensing.measurement import CAUSES
 from nerif.solvers import SOLVERS, Interrupted
@@ -149,8 +149,9 @@ def _prepare(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Option
     masks = MASKS.build(group(cfg, "mask"), scene=scene)
     solver.setup(scene, masks)  # checks a known truth against the prior first
     uncertainty.check(solver)
-    rig_warnings = check_sign(scene, cfg.field.prior) + ill_posed(scene)
+    rig_warnings = check_sign(scene, cfg.field.prior) + (ill_posed(scene) or missing_wedge(scene))
     write_masks(masks, scene, out_dir)
+    write_rig(scene, out_dir)
     write_sensing(scene, out_dir, CAUSES, cfg.data.get("cache_dir"))
     return solver, uncertainty, scene, rig_warnings
 

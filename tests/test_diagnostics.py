@@ -92,3 +92,75 @@ def test_every_view_failing_alike_is_said_once(written, tmp_path):
                                          "reference") as e:
         capture(_variant(written, tmp_path, None, no_flame), FLOW, binning=8)
     assert "camera 1" not in str(e.value)
+
+
+@pytest.mark.parametrize("n, span, gap", [(9, 120.0, 60.0), (9, 160.0, 20.0), (12, 165.0, 15.0), (18, 170.0, 10.0),
+                                          (4, 270.0, 90.0)])
+def test_the_widest_gap_of_viewing_directions_is_the_arcs_missing_wedge(n, span, gap):
+    """Closed form on an arc of n evenly spread views over ``span``: the gap is the larger of the spacing and what
+    the arc leaves of 180 degrees (opposite axes are one direction: 4 views over 270 degrees look along 2 lines)."""
+    from nerif.data.diagnostics import widest_gap_deg
+    from nerif.geometry.camera import arc_rig
+
+    assert widest_gap_deg(arc_rig(n, span)) == pytest.approx(gap, abs=1e-6)
+    assert widest_gap_deg(arc_rig(angles_deg=[0.0, 180.0, 360.0])) == pytest.approx(180.0)  # one line of sight
+
+
+def test_a_rig_turned_out_of_its_plane_has_the_same_wedge():
+    """The gap does not depend on how the rig sits: the arc's cameras rotated about x by 35 degrees and about y by
+    50 keep 9-over-120's 60 degrees."""
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+
+    from nerif.data.diagnostics import widest_gap_deg
+    from nerif.geometry.camera import arc_rig
+
+    turn = Rotation.from_euler("xy", [35, 50], degrees=True).as_matrix()
+    cams = [replace(c, rotation=np.asarray(turn) @ np.asarray(c.rotation)) for c in arc_rig(9, 120.0)]
+    assert widest_gap_deg(cams) == pytest.approx(60.0, abs=1e-6)
+
+
+def test_a_wide_missing_wedge_is_said_once_and_a_full_arc_is_not(caplog):
+    """Issue 66: 9 views over 120 degrees read flames' peaks 7-14 % cold with exact deflections, and nothing said
+    so; the sentence names the gap. 12 views over 165 degrees (15 degrees) stay silent."""
+    from types import SimpleNamespace
+
+    from nerif.data.diagnostics import missing_wedge
+    from nerif.geometry.camera import arc_rig
+
+    def scene(n, span):
+        cams = arc_rig(n, span)
+        return SimpleNamespace(cameras=cams, n_views=len(cams))
+
+    assert missing_wedge(scene(12, 165.0)) == [] and missing_wedge(scene(9, 160.0)) == []
+    msg = missing_wedge(scene(9, 120.0))
+    assert len(msg) == 1 and "leave 60 degrees of viewing directions unseen" in msg[0] and "cold" in msg[0]
+    assert msg[0] in caplog.text
+
+
+def test_a_pitch_that_makes_the_box_fill_the_frame_is_said_before_any_image_is_measured(written, tmp_path, caplog,
+                                                                                       monkeypatch):
+    """Issue 69: images binned in the camera with the rig file keeping the sensor's own pixel pitch gave 4x the
+    error and no word. The box then fills every frame (no ray shows the background beside the flame), a fact of
+    geometry said in one sentence before the flow runs; the clean capture says nothing."""
+    import nerif.data.capture as capture_module
+
+    class Measured(Exception):
+        pass
+
+    def stop(*_, **__):
+        raise Measured
+
+    monkeypatch.setattr(capture_module, "measure_cached", stop)
+    with pytest.raises(Measured):
+        capture(str(written[0]), FLOW, binning=8)
+    assert "fills the frame" not in caplog.text
+
+    def quarter_pitch(rig):
+        rig["camera"]["pitch_um"] = rig["camera"]["pitch_um"] / 4
+
+    with pytest.raises(Measured):  # said, then the measurement reached: a warning, not a stop
+        capture(_variant(written, tmp_path, quarter_pitch), FLOW, binning=8)
+    said = [r.getMessage() for r in caplog.records if "fills the frame" in r.getMessage()]
+    assert len(said) == 1 and "of 7 of 7 views" in said[0] and "pitch_um" in said[0] and "binned" in said[0]

@@ -95,3 +95,32 @@ def test_the_sequence_figure_shows_every_frame_s_central_slice_over_its_truth():
     np.testing.assert_array_equal(panels[1].images[0].get_array(), vols[1][:, :, 2].T)
     np.testing.assert_array_equal(panels[4].images[0].get_array(), vols[1][:, :, 2].T + 5.0)  # its truth, below
     assert len([a for a in sequence_figure([("a", vols[0], None)], BOX).axes if a.images]) == 1  # no truth: one row
+
+
+def test_the_rig_figure_shows_the_sense_of_the_order_and_the_world_axes_in_each_view(tmp_path):
+    """Issue 69: a rig listed in reverse (or turning clockwise) fits the data as well as the true one; the figure
+    shows the sense its order turns (from the cameras' positions, counter-clockwise seen from above for nerif's
+    arc), and in each view the box and the world's +x and +y where the rig puts them: for the camera on +z, +x
+    points to the image's right and +y up (image rows run down), a camera at 90 degrees sees +x come at it."""
+    from nerif.geometry.camera import arc_rig
+    from nerif.io.plots import rig_figure
+
+    cams = arc_rig(5, 90.0, width_px=64, height_px=96, binning=1)
+    box = ProbeBox((20, 30, 20), 1.0)
+    pictures = [(np.zeros((96, 64)), "|displacement| [px]")] * 5
+    fig = rig_figure(cams, box, {4}, pictures)
+    top = fig.axes[0]
+    assert top.get_title() == "seen from above: the views in their order turn counter-clockwise"
+    reversed_ = rig_figure(cams[::-1], box, {0}, pictures[::-1])
+    assert reversed_.axes[0].get_title() == "seen from above: the views in their order turn clockwise"
+    first = fig.axes[1]
+    arrows = [a for a in first.texts if a.arrow_patch is not None]  # +x then +y, from the box centre
+    (x0, y0), (x1, y1) = arrows[0].xyann, arrows[0].xy
+    assert x1 - x0 > 5 and abs(y1 - y0) < 1e-6  # +x: to the right
+    (x0, y0), (x1, y1) = arrows[1].xyann, arrows[1].xy
+    assert y1 - y0 < -5 and abs(x1 - x0) < 1e-6  # +y: up the image
+    side = [a for a in fig.axes[5].texts if a.arrow_patch is not None][0]  # camera 4, at 90 degrees, on +x
+    assert np.hypot(*np.subtract(side.xy, side.xyann)) < 1e-6  # +x along its line of sight
+    assert fig.axes[5].get_title() == "camera 04, held out"
+    img = cv2.imread(str(save_figure(fig, tmp_path / "rig.png")))
+    assert img is not None and img.std() > 10

@@ -34,3 +34,25 @@ def test_the_report_gives_the_widest_blur_and_what_the_chain_put_in():
     assert rep["circle_of_confusion_px"] == 2.5 and rep["circle_of_confusion_px_per_view"] == [1.5, 2.5]
     assert rep["shake_true_px"] == [[0.0, -0.2], [0.1, -0.2]] and "occluded_true" not in rep
     assert rep["displacement_rmse_px"] == 0.05
+
+
+def test_a_view_whose_noise_could_not_be_read_comes_back_without_one_and_weighs_as_the_median():
+    """Issue 68's defect: a finding the stage could not make (noise None: too few quiet pixels) was cached as NaN and
+    read back as a known noise of NaN, which made every view's weight, the loss and the run NaN. It comes back None,
+    shaped findings of the other views intact, and the view weighs as the median of the others' noise."""
+    from types import SimpleNamespace
+
+    from nerif.solvers.data_terms import noise_weights
+
+    views = [view(0, False), view(1, False), view(2, False)]
+    views[1]["found"] = {**views[1]["found"], "noise": None, "shake_px": None}
+    measured, _ = chain_records(views, displacement_rmse_px=0.05)
+    found = MeasuredViews.from_arrays(measured.arrays()).findings()
+    assert found[1].noise is None and found[1].shake_px is None
+    assert found[0].noise == 0.01 and found[2].shake_px == [0.2, 0.0]
+    w = noise_weights(SimpleNamespace(findings=found)).numpy()
+    # noise 0.01, median 0.02, 0.03: 1/sigma^2 over its mean
+    inverse = 1 / np.array([0.01, 0.02, 0.03]) ** 2
+    np.testing.assert_allclose(w, inverse / inverse.mean())
+    nan_read = [Findings(noise=0.01), Findings(noise=float("nan")), Findings(noise=0.03)]
+    np.testing.assert_allclose(noise_weights(SimpleNamespace(findings=nan_read)).numpy(), w)

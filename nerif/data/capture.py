@@ -24,7 +24,7 @@ from nerif.data.capture_images import capture_files, check_images, lossy_images,
 from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest, resolve_binning
 from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.rig_file import RigFile, read_rig
-from nerif.data.diagnostics import screened
+from nerif.data.diagnostics import box_fills_frame, screened
 from nerif.data.scene import (DATASETS, Scene, ViewImages, heldout_views,
                               scene_from_displacements)
 from nerif.geometry import Camera, outside_the_box, rays_in_box
@@ -193,6 +193,8 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
     files = [p for exposed in distorted + references for p in exposed]
     check_images(files + flame, rig.sensor_px)  # one bit depth for all, from the headers
     full, cameras, roi, rays = rig_geometry(rig, binning, device)
+    quiet = outside_the_box(cameras, rays[2], rays[3])
+    box_fills_frame(cameras, quiet, roi, rig.box, str(rig.path))  # a scale off by a factor, before any image is read
     held = (heldout_views(heldout, len(cameras), "data.heldout") if heldout is not None else
             heldout_views([len(cameras) - 1] if rig.heldout is None else list(rig.heldout), len(cameras),
                           f"{rig.path}: heldout"))
@@ -206,7 +208,6 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
     flames = reference_images([(p,) for p in flame], rig.sensor_px, "flame")[0] if flame else [None] * len(images)
     hidden = occluder_masks(rig, lambda paths: reference_images([(p,) for p in paths], rig.sensor_px, "occluders")[0])
     check_flow(flow)  # settings that cannot measure say so once, not as an empty view each
-    quiet = outside_the_box(cameras, rays[2], rays[3])
     measured, cached = zip(*[measure_cached(cache_dir, measure, images[v], refs[v], name=cam.name, flow=flow,
                                             flame=flames[v], hidden=hidden[v], grid_px=(cam.height, cam.width),
                                             region=roi, quiet=quiet[v])

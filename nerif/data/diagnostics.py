@@ -1,6 +1,7 @@
 """The checks of a scene's data, each threshold and sentence here: each view of a capture checked on its own
 (:func:`screened`), what concerns the whole capture (:func:`beyond_the_box`, :func:`clipping`), the deflections'
-sign (:func:`check_sign`) and whether the views can fix a 3-D field at all (:func:`ill_posed`).
+sign (:func:`check_sign`), whether the views can fix a 3-D field at all (:func:`ill_posed`) and the directions they
+leave unseen (:func:`missing_wedge`).
 
 Each view of a capture is checked on its own, before it enters the visual hull or the loss. One bad view (a
 distorted image that is black, or a copy of its reference, a camera knocked between the exposures, a pair of
@@ -29,6 +30,13 @@ ABSENT, WILD = 0.25, 4.0  # a view's RMS displacement against the views' median:
 SIGN = 0.2  # hot evidence (:func:`hot_evidence`) beyond which the deflections' sign is clear (a flame: -0.3 to -1)
 MIN_DIRECTIONS = 3  # distinct viewing directions a 3-D field needs
 SPAN_DEG = 30.0  # the widest angle between viewing axes below which tomography is ill-posed [deg]
+FILLED = 0.05  # a view with fewer of its rays (in the region of interest) missing the probe box than this: the box fills
+               # its frame (the shared captures: 0.54-0.66; their pitch halved, as for images binned 2 x 2 in the
+               # camera: 0.00)
+WEDGE_DEG = 45.0  # the widest gap of viewing directions [deg] beyond which a run says what it leaves unmeasured: with
+                 # exact deflections, 9 views over 120 deg (a 60 deg gap) read two flames' peaks 7 and 14 % cold, 9
+                 # over 160 deg (20 deg) 5 and 3 %, 18 over 170 deg 2.5 % (benchmarks/RESULTS.md, issue 66); 9 over
+                 # 160 deg less a held-out view at an end leave 40 deg
 RADIANS_DEG = 6.5  # a span below this [deg] is what angles of a wide arc given in radians look like (0 to 2.6 rad)
 KNOCKED_PX = 1.0  # a shake larger than this [px of the full sensor] and than its flame's displacements: knocked
 CLIPPED = 0.10  # a view with more of its pixels at full scale than this is said to clip: nerif's own chain clips the
@@ -217,6 +225,58 @@ def view_span_deg(cameras: list[Camera]) -> float:
     axes = np.stack([np.asarray(c.rotation)[:, 2] for c in cameras])
     cos = np.clip(np.abs(axes @ axes.T), 0.0, 1.0)
     return float(np.rad2deg(np.arccos(cos.min())))
+
+
+def box_fills_frame(cameras: list[Camera], quiet: list[np.ndarray], roi: np.ndarray, box, source: str) -> list[str]:
+    """One sentence (logged, and returned) where the probe box fills some views' frames: fewer than :data:`FILLED`
+    of their rays in the region of interest ``roi`` (h, w) miss the box (``quiet``, per view (h, w) bool:
+    :func:`nerif.geometry.outside_the_box`). A real capture shows the undisturbed background around its flame (the
+    measurement reads the shake and the noise there); a frame that the box fills is, far more often than a real
+    set-up, a scale off by a factor: images binned in the camera with the unbinned pixel pitch, a focal length or a
+    distance wrong. Said before any image is measured, with the field of view the rig gives at the probe."""
+    from nerif.geometry import ray_spacing_mm
+
+    filled = [c.name for c, q in zip(cameras, quiet) if q[roi].mean() < FILLED]
+    if not filled:
+        return []
+    step = ray_spacing_mm(cameras, box)
+    seen = f"{cameras[0].width * step:.0f} x {cameras[0].height * step:.0f} mm"
+    extent = " x ".join(f"{e:.0f}" for e in box.extent_mm)
+    msg = (f"the probe box fills the frame of {len(filled)} of {len(cameras)} views ({', '.join(filled[:4])}"
+           f"{', ...' if len(filled) > 4 else ''}): the rig gives a field of view of {seen} at the probe centre "
+           f"for a box of {extent} mm, so no ray shows the undisturbed background beside the flame. Usual causes: "
+           "images binned in the camera while pitch_um is the sensor's own pixel (binned 2 x 2: twice it), the "
+           f"focal length or the camera's distance off; check camera: pitch_um, focal_mm and the distances in {source}")
+    log.warning("%s", msg)
+    return [msg]
+
+
+def widest_gap_deg(cameras: list[Camera]) -> float:
+    """The widest gap [deg] between the cameras' viewing directions, opposite axes counting as one (0 to 180): the
+    missing wedge of limited-angle tomography. The axes' azimuths about the normal of the plane they lie nearest
+    (the axis the rig turns about), sorted over 180 degrees; 180 for cameras that all look one way."""
+    axes = np.stack([np.asarray(c.rotation, dtype=np.float64)[:, 2] for c in cameras])
+    normal = np.linalg.eigh(axes.T @ axes)[1][:, 0]  # the direction the axes have least of
+    u = np.cross(normal, axes[np.argmax(np.linalg.norm(np.cross(normal, axes), axis=1))])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    azimuth = np.sort(np.rad2deg(np.arctan2(axes @ v, axes @ u)) % 180.0)
+    return float(np.diff(np.append(azimuth, azimuth[0] + 180.0)).max())
+
+
+def missing_wedge(scene) -> list[str]:
+    """One sentence (logged, and returned for ``metrics.json``) where the training views leave a gap of viewing
+    directions wider than :data:`WEDGE_DEG`: what only those directions would show is not measured, and a hot core's
+    peak may read cold by more than its interval allows."""
+    gap = widest_gap_deg(scene.cameras)
+    if gap <= WEDGE_DEG:
+        return []
+    msg = (f"the {scene.n_views} training views leave {gap:.0f} degrees of viewing directions unseen (their widest "
+           "gap, the missing wedge): structure only those directions would show is not measured, and a hot core's "
+           "peak may read cold beyond its interval (with exact deflections, 9 views over 120 degrees read flames' "
+           "peaks 7-14 % cold, over 160 degrees 3-5 %); cameras spread over 180 degrees close it")
+    log.warning("%s", msg)
+    return [msg]
 
 
 def check_sign(scene, prior) -> list[str]:

@@ -22,7 +22,7 @@ from nerif.metrics import (reported_intervals, resolved_peak_figures, temperatur
                            within_intervals)
 from nerif.resolution import effective_resolution_mm, resolved_peak
 from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
-                             profiles_figure, save_figure, sensing_figure, slice_figure)
+                             profiles_figure, rig_figure, save_figure, sensing_figure, slice_figure)
 from nerif.units import SHARE, SIGMA, VOLUMES, declare
 
 log = logging.getLogger(__name__)
@@ -66,6 +66,25 @@ def write_masks(masks, scene, out_dir: Path) -> None:
         write_npz(out_dir / "mask3d.npz", units=VOLUMES, mask=masks.volume, voxel_mm=scene.box.voxel_mm,
                   origin_mm=np.asarray(origin))
         write_vti(out_dir / "mask3d.vti", scene.box.voxel_mm, origin, units=VOLUMES, mask=masks.volume.astype(np.float32))
+
+
+def write_rig(scene, out_dir: Path) -> None:
+    """``rig.png`` (:func:`~nerif.io.plots.rig_figure`): every view, training and held out, in the rig's order,
+    seen from above with its angle and the sense its order turns, beside each measured view's displacement
+    magnitude with the probe box and the world's axes drawn where the rig puts them: a mirrored or reversed rig
+    shows there before the fit."""
+    views = [*scene.views, *(scene.heldout.views if scene.heldout is not None else [])]
+    order = np.argsort([rig_index(v.camera.name, k) for k, v in enumerate(views)], kind="stable")
+    views = [views[k] for k in order]
+    held = {k for k, j in enumerate(order) if j >= scene.n_views}
+
+    def picture(view):
+        if view.measured_px is None:
+            return None
+        return np.linalg.norm(np.nan_to_num(view.measured_px), axis=-1), "|displacement| [px]"
+
+    save_figure(rig_figure([v.camera for v in views], scene.box, held, [picture(v) for v in views]),
+                out_dir / "rig.png")
 
 
 def write_sensing(scene, out_dir: Path, causes: tuple = (), cache_dir=None) -> None:
@@ -138,6 +157,12 @@ def uncertainty_report(vols: dict, scene) -> dict:
         truth = scene.ambient.sigma_from_temperature(scene.truth_T)
         out.update({f"uncertainty_{k}": v for k, v in uncertainty_scores(sigma, std, truth).items()})
     return out
+
+
+def rig_index(name: str, default: int) -> int:
+    """A camera's place in the rig from its name (``camera 8 (160.0 deg)`` -> 8), else ``default``."""
+    m = re.match(r"camera (\d+)", name)
+    return int(m.group(1)) if m else default
 
 
 def camera_file(name: str) -> str:

@@ -359,3 +359,86 @@ def measured_figure(reference: np.ndarray, displacement: np.ndarray, left_out: n
     if title:
         fig.suptitle(title, fontsize=10)
     return fig
+
+
+ROTATION_NOTE = ("nerif's convention: a view's angle turns from +z towards +x, counter-clockwise seen from above "
+                 "(y up);\nimage columns run to the right, rows down")
+
+
+def _box_edges(box: ProbeBox) -> np.ndarray:
+    """(12, 2, 3) the probe box's edges [mm], the box centred on the origin."""
+    h = np.asarray(box.half_mm, dtype=np.float64)
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
+    pairs = [(a, b) for a in range(8) for b in range(a + 1, 8) if np.sum(corners[a] != corners[b]) == 1]
+    return np.stack([corners[[a, b]] for a, b in pairs])
+
+
+def rig_figure(cameras: list, box: ProbeBox, heldout: set, pictures: list, title: str = ""):
+    """The rig seen from above beside each view's picture with the box drawn where the rig puts it.
+
+    Args:
+        cameras: every view's :class:`~nerif.geometry.Camera`, in the rig's order (positions [mm]).
+        box: the probe box, centred on the origin.
+        heldout: indices of the views held out of training.
+        pictures: per view None, or (image (h, w) on the camera's pixel grid, its label): the measured displacement
+            magnitude (the flame as the view sees it) or the reference.
+        title: the figure's title.
+
+    Left: the cameras (x right, z down: seen from above, y towards the reader) with their names and angles, their
+    lines of sight, the box's footprint and an arrow from the first view to the second (the order's sense of
+    rotation). Right: each picture with the box's edges and the world's +x (red) and +y (green) from the box centre
+    projected into it, so that an object placed on the burner's +x side can be checked in the images."""
+    shown = [v for v, p in enumerate(pictures) if p is not None]
+    cols = min(4, max(len(shown), 1))
+    rows = max(1, -(-len(shown) // cols))
+    if shown:
+        fig = plt.figure(figsize=(5.5 + 2.4 * cols, max(5.5, 2.9 * rows)), layout="constrained")
+        grid = fig.add_gridspec(rows, cols + 2)
+        top = fig.add_subplot(grid[:, :2])
+    else:  # no pictures (deflections given): the view from above alone
+        fig, top = plt.subplots(figsize=(7.5, 7.5), layout="constrained")
+    pos = np.stack([np.asarray(c.position, dtype=np.float64) for c in cameras])
+    h = np.asarray(box.half_mm, dtype=np.float64)
+    top.add_patch(plt.Rectangle((-h[0], -h[2]), 2 * h[0], 2 * h[2], fill=False, color="k", lw=1.2))
+    for v, (c, p) in enumerate(zip(cameras, pos)):
+        held = v in heldout
+        colour = "tab:orange" if held else "tab:blue"
+        top.plot([p[0], 0], [p[2], 0], color=colour, lw=0.5, alpha=0.5)
+        top.plot(p[0], p[2], "o", color=colour)
+        angle = "" if "deg" in c.name else f"\n{np.degrees(np.arctan2(p[0], p[2])):.1f} deg"
+        top.annotate(f"{c.name}{angle}" + ("\nheld out" if held else ""), (p[0], p[2]), fontsize=7,
+                     textcoords="offset points", xytext=(6, 4), color=colour)
+    if len(cameras) > 1:
+        a, b = 0.55 * pos[0], 0.55 * pos[1]
+        turn = np.sign(pos[0][2] * pos[1][0] - pos[0][0] * pos[1][2])  # from z towards x: + counter-clockwise from above
+        top.annotate("", xy=(b[0], b[2]), xytext=(a[0], a[2]),
+                     arrowprops={"arrowstyle": "->", "connectionstyle": f"arc3,rad={0.3 * turn}", "color": "k"})
+        sense = "counter-clockwise" if turn > 0 else "clockwise"
+        top.set_title(f"seen from above: the views in their order turn {sense}", fontsize=9)
+    top.set_xlabel("x [mm]")
+    top.set_ylabel("z [mm] (down the page: seen from above)")
+    top.set_aspect("equal")
+    top.invert_yaxis()
+    edges = _box_edges(box)
+    for k, v in enumerate(shown):
+        ax = fig.add_subplot(grid[k // cols, 2 + k % cols])
+        image, label = pictures[v]
+        ax.imshow(image, cmap="gray" if label == "reference" else "magma")
+        cam = cameras[v]
+        for e in cam.project(edges) - 0.5:  # pixel centres at +0.5, imshow's at 0
+            ax.plot(e[:, 0], e[:, 1], color="tab:cyan", lw=0.8)
+        for axis, colour in ((0, "red"), (1, "lime")):
+            tip = np.zeros((2, 3))
+            tip[1, axis] = h[axis]
+            (x0, y0), (x1, y1) = cam.project(tip) - 0.5
+            ax.annotate("", xy=(x1, y1), xytext=(x0, y0), arrowprops={"arrowstyle": "->", "color": colour})
+        ax.set_title(cam.name.split(" (")[0] + (", held out" if v in heldout else ""), fontsize=8)
+        ax.set_xlim(-0.5, cam.width - 0.5)
+        ax.set_ylim(cam.height - 0.5, -0.5)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    labels = sorted({p[1] for p in pictures if p is not None})
+    fig.suptitle((title or "the rig") + (f"; in each view ({', '.join(labels)}) the probe box (cyan) and the world's "
+                                         "+x (red) and +y (green) from its centre" if labels else "")
+                 + f"\n{ROTATION_NOTE}", fontsize=9)
+    return fig

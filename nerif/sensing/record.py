@@ -22,6 +22,18 @@ def _arrays(record) -> dict:
     return {**out, **{f"found/{k}": np.asarray(v) for k, v in getattr(record, "found", {}).items()}}
 
 
+def _stacked_finding(values: list) -> np.ndarray:
+    """(V, ...) float64 of one finding over the views, NaN where a view has none (None: the stage could not make
+    it), shaped as the views that have one."""
+    shape = next((np.shape(x) for x in values if x is not None), ())
+    return np.stack([np.full(shape, np.nan) if x is None else np.asarray(x, dtype=np.float64) for x in values])
+
+
+def _missing_as_none(value):
+    """A view's finding as :func:`_stacked_finding` stored it: None where it is NaN throughout (no finding)."""
+    return None if np.all(np.isnan(np.asarray(value, dtype=np.float64))) else value
+
+
 def _fields(cls, arrays: dict) -> dict:
     """The keyword arguments of ``cls`` in ``arrays`` (as :func:`_arrays` wrote them)."""
     names = {f.name for f in fields(cls)} - {"found"}
@@ -59,9 +71,10 @@ class MeasuredViews:
         return cls(**_fields(cls, arrays), found=found)
 
     def findings(self) -> list[Findings]:
-        """Each view's :class:`Findings`."""
+        """Each view's :class:`Findings`; a finding the stage could not make in a view (stored as NaN) is None
+        there, as the stage left it."""
         per_view = {k: v.tolist() for k, v in self.found.items()}
-        return [Findings.read({k: x[v] for k, x in per_view.items()}) for v in range(len(self.valid))]
+        return [Findings.read({k: _missing_as_none(x[v]) for k, x in per_view.items()}) for v in range(len(self.valid))]
 
 
 @dataclass(frozen=True)
@@ -112,6 +125,6 @@ def chain_records(views: list[dict], displacement_rmse_px: float) -> tuple[Measu
         return {f.name: np.stack([v[f.name] for v in views]) for f in fields(cls)
                 if f.name not in ("found", "displacement_rmse_px") and views[0].get(f.name) is not None}
 
-    found = {k: np.stack([np.asarray(v["found"][k], dtype=np.float64) for v in views]) for k in views[0]["found"]}
+    found = {k: _stacked_finding([v["found"][k] for v in views]) for k in views[0]["found"]}
     return (MeasuredViews(**stacked(MeasuredViews), found=found),
             SensingRecord(**stacked(SensingRecord), displacement_rmse_px=float(displacement_rmse_px)))

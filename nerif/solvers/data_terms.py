@@ -125,11 +125,11 @@ def noise_weights(scene: Scene) -> Optional[torch.Tensor]:
     alike): ``1 / sigma_v^2`` over its mean over the views (maximum likelihood: a view
     twice as noisy counts a quarter; views of one noise level count 1 each); None where the scene holds no reading
     (a synthetic scene's deflections)."""
-    noise = [f.noise for f in scene.findings] if scene.findings else None
-    known = [n for n in noise or () if n]
+    noise = [f.noise if f.noise and np.isfinite(f.noise) else None for f in scene.findings or ()]
+    known = [n for n in noise if n is not None]
     if not known:
         return None
-    sigma = torch.tensor([n if n else float(np.median(known)) for n in noise], dtype=torch.float64)
+    sigma = torch.tensor([float(np.median(known)) if n is None else n for n in noise], dtype=torch.float64)
     inverse = 1 / sigma.clamp(min=NOISE_FLOOR) ** 2
     return inverse / inverse.mean()
 
