@@ -71,6 +71,15 @@ def _tiles(where: np.ndarray) -> list[tuple[slice, slice]]:
     return sorted(tiles, key=lambda t: -int(np.count_nonzero(where[t])))[:TILES]
 
 
+def grown_tiles(where: np.ndarray, margin: int) -> list[tuple[tuple[slice, slice], tuple[slice, slice]]]:
+    """Per tile of :func:`_tiles` (the image whole, or the tiles holding the most of ``where`` (H, W)): the tile and
+    the tile grown by ``margin`` px on each side within the image (what its filters need read)."""
+    H, W = where.shape
+    return [((rows, cols), (slice(max(rows.start - margin, 0), min(rows.stop + margin, H)),
+                            slice(max(cols.start - margin, 0), min(cols.stop + margin, W))))
+            for rows, cols in _tiles(where)]
+
+
 def residual_noise(distorted: np.ndarray, reference: np.ndarray, u: np.ndarray, where: Optional[np.ndarray] = None,
                    width_px: float = 2.0) -> Optional[float]:
     """One exposure's noise [share of full scale]: the robust RMS (1.4826 median absolute deviations) of what the
@@ -87,12 +96,8 @@ def residual_noise(distorted: np.ndarray, reference: np.ndarray, u: np.ndarray, 
     where = np.ones(reference.shape, bool) if where is None else np.asarray(where, dtype=bool)
     if int(np.count_nonzero(where)) < MIN_PIXELS:
         return None
-    margin = int(np.ceil(3 * BLUR_WIDTHS * width_px))
-    H, W = reference.shape
     parts = []
-    for rows, cols in _tiles(where):
-        grown = (slice(max(rows.start - margin, 0), min(rows.stop + margin, H)),
-                 slice(max(cols.start - margin, 0), min(cols.stop + margin, W)))
+    for (rows, cols), grown in grown_tiles(where, int(np.ceil(3 * BLUR_WIDTHS * width_px))):
         r = _residual(distorted[grown], reference[grown], u[grown], width_px)
         inner = (slice(rows.start - grown[0].start, rows.stop - grown[0].start),
                  slice(cols.start - grown[1].start, cols.stop - grown[1].start))

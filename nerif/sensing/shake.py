@@ -56,7 +56,7 @@ def photometric_shift(distorted: np.ndarray, reference: np.ndarray, where: np.nd
     Measured on a Poisson-disk pattern shifted exactly (the pixels integrating it): 0.98-1.00x the true shift,
     where the flow reads 1.10-1.15x; ``start`` where fewer than :data:`MIN_QUIET` pixels are given."""
     from nerif.sensing.interpolation import interpolation
-    from nerif.sensing.noise import BLUR_WIDTHS, _tiles
+    from nerif.sensing.noise import BLUR_WIDTHS, grown_tiles
 
     blur_px = BLUR_WIDTHS * float(width_px)
     margin = int(np.ceil(3 * blur_px)) + 4
@@ -73,11 +73,9 @@ def photometric_shift(distorted: np.ndarray, reference: np.ndarray, where: np.nd
         return d / np.sqrt(cv2.GaussianBlur(d * d, (0, 0), blur_px) + 1e-12)
 
     read, rng = interpolation("bandlimited"), np.random.default_rng(0)
-    tiles = _tiles(where)
+    tiles = grown_tiles(where, margin)
     parts = []  # per tile: the reference's picture, its pixels (P, 2) in the tile, the distorted image there (P,)
-    for rows, cols in tiles:
-        grown = (slice(max(rows.start - margin, 0), min(rows.stop + margin, H)),
-                 slice(max(cols.start - margin, 0), min(cols.stop + margin, W)))
+    for (rows, cols), grown in tiles:
         r, c = np.nonzero(where[rows, cols])
         if len(r) > POINTS // len(tiles):
             pick = rng.choice(len(r), POINTS // len(tiles), replace=False)
