@@ -151,7 +151,6 @@ def _prepare(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Option
     uncertainty.check(solver)
     rig_warnings = check_sign(scene, cfg.field.prior) + (ill_posed(scene) or missing_wedge(scene))
     write_masks(masks, scene, out_dir)
-    write_rig(scene, out_dir)
     write_sensing(scene, out_dir, CAUSES, cfg.data.get("cache_dir"))
     return solver, uncertainty, scene, rig_warnings
 
@@ -229,6 +228,8 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
     t_start = time.perf_counter() if t_start is None else t_start
     torch.manual_seed(cfg.seed)
     solver, uncertainty, scene, rig_warnings = _prepare(cfg, out_dir, device, frame)
+    if start_from is None:  # a series' later frames share the first's rig (and a figure costs a second)
+        write_rig(scene, out_dir)
     checkpoint = out_dir / "checkpoint.pt"
     _start(solver, cfg.train.resume, checkpoint, start_from)
     setup_s = time.perf_counter() - t_start

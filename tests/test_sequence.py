@@ -38,6 +38,7 @@ def test_a_series_writes_every_frame_and_the_series_outputs(series):
         frame = json.loads((out / f"frame_{k:04d}" / "metrics.json").read_text())
         assert frame["frame"] == k and frame["temperature_rmse_K"] > 0
         assert (out / f"frame_{k:04d}" / "reconstruction.vti").is_file()
+        assert (out / f"frame_{k:04d}" / "rig.png").is_file() == (k == 0)  # the rig drawn once, with the cold frame
     assert m["temperature_rmse_K"] == pytest.approx(sum(r["temperature_rmse_K"] for r in m["frames"]) / 3)
     # the ParaView time series lists every frame's volume with its time
     sets = ET.parse(out / "sequence.pvd").getroot().find("Collection").findall("DataSet")
