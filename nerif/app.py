@@ -96,6 +96,9 @@ def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     check_complete(cfg)
+    if not isinstance(cfg.figures, bool):
+        raise ValueError(f"figures={cfg.figures!r}: true (the results' pictures drawn) or false (the data files "
+                         "alone)")
     check_train(group(cfg, "train"), cfg.seed)
     device = resolve_device(cfg.device)
     check_memory(allocations(cfg), device)

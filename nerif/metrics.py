@@ -19,6 +19,17 @@ def flame_region(T_true: np.ndarray, T0: float, threshold_K: float = 1.0) -> np.
     return np.abs(T_true - T0) > threshold_K
 
 
+FLAME_SHARE = 0.05  # the flame of a field without a known ambient temperature: |sigma| above this share of its peak
+
+
+def flame_share_region(sigma: np.ndarray, share: float = FLAME_SHARE, empty: bool = False) -> np.ndarray:
+    """(nx, ny, nz) bool: where ``|sigma|`` exceeds ``share`` of its largest value (a field's flame read from the
+    field itself); a field of zeros has none (``empty``: what it is then, every voxel or none)."""
+    a = np.abs(np.asarray(sigma))
+    peak = a.max() if a.size else 0.0
+    return a > share * peak if peak > 0 else np.full(a.shape, empty, bool)
+
+
 def deflection_rmse(eps: torch.Tensor, eps_obs: torch.Tensor) -> float:
     """sqrt(mean over rays of |eps - eps_obs|^2); (R, 3) each."""
     return float(((eps - eps_obs) ** 2).sum(-1).mean().sqrt())
@@ -54,7 +65,7 @@ def select_by_heldout(runs: dict) -> object:
 
 
 def uncertainty_scores(sigma: np.ndarray, sigma_std: np.ndarray, sigma_true: np.ndarray,
-                       flame_share: float = 0.05, core_share: float = 0.05) -> dict:
+                       flame_share: float = FLAME_SHARE, core_share: float = 0.05) -> dict:
     """How well a per-voxel standard deviation ``sigma_std`` describes the error of ``sigma`` against
     ``sigma_true`` (all (nx, ny, nz)), over the flame voxels (``|sigma_true|`` above ``flame_share`` of its peak):
     ``coverage_1sigma``, ``coverage_2sigma`` (the share whose error lies within 1 and 2 standard deviations; a
@@ -67,7 +78,7 @@ def uncertainty_scores(sigma: np.ndarray, sigma_std: np.ndarray, sigma_true: np.
     from scipy.stats import spearmanr
 
     truth = np.abs(sigma_true)
-    flame = truth > flame_share * truth.max() if truth.max() > 0 else np.zeros_like(truth, bool)
+    flame = flame_share_region(truth, flame_share)
     if flame.sum() < 10:
         return {}
     err, std = np.abs(sigma - sigma_true)[flame], np.asarray(sigma_std)[flame]

@@ -150,8 +150,8 @@ def _prepare(cfg: DictConfig, out_dir: Path, device: torch.device, frame: Option
     solver.setup(scene, masks)  # checks a known truth against the prior first
     uncertainty.check(solver)
     rig_warnings = check_sign(scene, cfg.field.prior) + (ill_posed(scene) or missing_wedge(scene))
-    write_masks(masks, scene, out_dir)
-    write_sensing(scene, out_dir, CAUSES, cfg.data.get("cache_dir"))
+    write_masks(masks, scene, out_dir, cfg.figures)
+    write_sensing(scene, out_dir, CAUSES, cfg.data.get("cache_dir"), cfg.figures)
     return solver, uncertainty, scene, rig_warnings
 
 
@@ -196,7 +196,7 @@ def _write(solver, scene, out_dir: Path, board: Board, cfg: DictConfig, device: 
     try:
         try:
             metrics = write_outputs(solver, scene, out_dir, board.losses, flame_above_K=cfg.metrics.flame_above_K,
-                                    show=board.show)
+                                    show=board.show, figures=cfg.figures)
         finally:
             board.close()
         about = dict(about or {})
@@ -215,7 +215,7 @@ def _write(solver, scene, out_dir: Path, board: Board, cfg: DictConfig, device: 
     except OSError as e:  # a full disk: one sentence saying what is there and what is not
         solver.checkpoint(checkpoint)  # the final state where it still fits, for a resumed run to write them from
         saved = sorted(p.name for p in out_dir.iterdir() if not p.name.startswith("."))
-        missing = [f for f in RESULTS if f not in saved]
+        missing = [f for f in RESULTS if f not in saved and (cfg.figures or not f.endswith(".png"))]
         raise ValueError(f"writing the results to {out_dir} failed ({e.strerror or e}); it holds "
                          f"{', '.join(saved) or 'nothing'}, not {', '.join(missing)}: free some space and write "
                          "them again with train.resume=auto") from None
@@ -228,7 +228,7 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
     t_start = time.perf_counter() if t_start is None else t_start
     torch.manual_seed(cfg.seed)
     solver, uncertainty, scene, rig_warnings = _prepare(cfg, out_dir, device, frame)
-    if start_from is None:  # a series' later frames share the first's rig (and a figure costs a second)
+    if start_from is None and cfg.figures:  # a series' later frames share the first's rig (a figure costs a second)
         write_rig(scene, out_dir)
     checkpoint = out_dir / "checkpoint.pt"
     _start(solver, cfg.train.resume, checkpoint, start_from)

@@ -117,12 +117,12 @@ def run_sequence(cfg: DictConfig, out_dir: Path, device: torch.device, frames: l
             rows.append({**{k: m.get(k) for k in FINAL_KEYS}, "frame": f.index, "time_s": f.time_s,
                          "warm_start": bool(m.get("warm_start")), "folder": folder.name})
             unit = m.get("deflection_unit", unit)
-            log_frame(writer, rows[-1], folder)
+            log_frame(writer, rows[-1], folder, cfg.figures)
             previous = folder / "checkpoint.pt"
     finally:
         writer.close()
         if rows:
-            write_series(rows, out_dir)
+            write_series(rows, out_dir, cfg.figures)
     metrics = series_metrics(rows, frames, cfg)
     if unit is not None:
         metrics["deflection_unit"] = unit
@@ -142,23 +142,27 @@ def frame_volume(folder: Path):
     return vol, truth, ("K" if key == "T" else "sigma"), box
 
 
-def log_frame(writer, row: dict, folder: Path) -> None:
-    """One TensorBoard step per frame (step = frame index): its final metrics and slices."""
+def log_frame(writer, row: dict, folder: Path, figures: bool = True) -> None:
+    """One TensorBoard step per frame (step = frame index): its final metrics and (``figures``) slices."""
     for k, v in row.items():
         if k not in ("frame", "folder") and isinstance(v, (int, float)) and v is not None:
             writer.add_scalar(f"frame/{k}", float(v), row["frame"])
-    vol, truth, unit, box = frame_volume(folder)
-    writer.add_figure("frame/slices", slice_figure(vol, box, truth, f"frame {row['frame']}, t = {row['time_s']:.4g} s",
-                                                   unit=unit), row["frame"])
+    if figures:
+        vol, truth, unit, box = frame_volume(folder)
+        writer.add_figure("frame/slices", slice_figure(vol, box, truth,
+                                                       f"frame {row['frame']}, t = {row['time_s']:.4g} s", unit=unit),
+                          row["frame"])
     writer.flush()
 
 
-def write_series(rows: list[dict], out_dir: Path) -> None:
-    """``sequence.pvd``, ``frames.md``/``.csv`` and ``sequence.png`` of the finished frames."""
+def write_series(rows: list[dict], out_dir: Path, figures: bool = True) -> None:
+    """``sequence.pvd``, ``frames.md``/``.csv`` and (``figures``) ``sequence.png`` of the finished frames."""
     write_pvd(out_dir / "sequence.pvd", [(r["time_s"], f"{r['folder']}/reconstruction.vti") for r in rows])
     table = [{"config": f"frame {r['frame']} (t = {r['time_s']:.4g} s, {'warm' if r['warm_start'] else 'cold'})",
               **r} for r in rows]
     write_tables(table, out_dir, stem="frames", header="Frames of the time series (sequence.pvd opens them in ParaView)")
+    if not figures:
+        return
     panels = []
     for r in rows:
         vol, truth, unit, box = frame_volume(out_dir / r["folder"])

@@ -3,6 +3,9 @@ import os
 # Triton kernels (nerif.encoders.hash_kernel) run in Triton's interpreter on the CPU; the switch is read when a
 # kernel is defined, so it is set before any test imports nerif.
 os.environ.setdefault("TRITON_INTERPRET", "1")
+# The runs of the suite write their data files without the pictures (config `figures`, 60 % of a tiny run's time);
+# a test of a picture is marked `figures` and draws them.
+os.environ["NERIF_FIGURES"] = "false"
 
 import pytest
 import torch
@@ -19,6 +22,12 @@ def pytest_report_header(config):
         return (f"shared data: {SHARED} is not there (a fresh clone; set NERIF_SHARED to the folder holding data/): "
                 "the tests of the shared captures are skipped")
     return None
+
+
+@pytest.fixture(autouse=True)
+def _figures(request, monkeypatch):
+    if request.node.get_closest_marker("figures"):
+        monkeypatch.setenv("NERIF_FIGURES", "true")
 
 
 @pytest.fixture(autouse=True)

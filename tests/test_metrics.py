@@ -149,3 +149,12 @@ def test_a_blurred_cores_peak_read_through_the_resolution_is_closer_and_its_inte
     iv = reported_intervals(field, np.full(box.shape, 0.005), amb.temperature_from_sigma, box.axes(), 1000.0, -1.05,
                             blur_vox=0.8)
     assert iv["T_peak_interval_K"][0] < 1850.0 < iv["T_peak_interval_K"][1]
+
+
+def test_a_fields_flame_is_where_its_magnitude_passes_a_share_of_its_peak():
+    from nerif.metrics import flame_share_region
+
+    sigma = np.array([0.0, -0.01, -0.06, -1.0, 0.2])
+    assert flame_share_region(sigma).tolist() == [False, False, True, True, True]
+    assert flame_share_region(sigma, 0.5).tolist() == [False, False, False, True, False]
+    assert not flame_share_region(np.zeros(3)).any() and flame_share_region(np.zeros(3), empty=True).all()

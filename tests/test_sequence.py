@@ -26,7 +26,7 @@ def series_config(*overrides):
 @pytest.fixture(scope="module")
 def series(tmp_path_factory):
     out = tmp_path_factory.mktemp("series")
-    return out, run(series_config(), out)
+    return out, run(series_config("figures=true"), out)  # the series' pictures are among its outputs
 
 
 def test_a_series_writes_every_frame_and_the_series_outputs(series):

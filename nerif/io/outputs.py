@@ -18,8 +18,8 @@ import torch
 import nerif.io.plots as plots
 from nerif.cache import cached_arrays, content_digest, source_digest
 from nerif.export import atomic_write, to_uint8, write_npz, write_png, write_vti
-from nerif.metrics import (reported_intervals, resolved_peak_figures, temperature_figures, uncertainty_scores,
-                           within_intervals)
+from nerif.metrics import (flame_share_region, reported_intervals, resolved_peak_figures, temperature_figures,
+                           uncertainty_scores, within_intervals)
 from nerif.resolution import effective_resolution_mm, resolved_peak
 from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
                              profiles_figure, rig_figure, save_figure, sensing_figure, slice_figure)
@@ -49,12 +49,12 @@ declare(uncertainty_coverage_1sigma=SHARE, uncertainty_coverage_2sigma=SHARE, un
 RESULTS = ("reconstruction.npz", "reconstruction.vti", "slices.png", "profiles.png", "curves.png", "metrics.json")
 
 
-def write_masks(masks, scene, out_dir: Path) -> None:
+def write_masks(masks, scene, out_dir: Path, figures: bool = True) -> None:
     """2-D masks as PNGs (one per view, 255 inside), ``masks/masks2d.png`` (every view's mask over its measured
-    deflections), and the 3-D mask as a volume."""
+    deflections; ``figures``: drawn), and the 3-D mask as a volume."""
     for v, img in enumerate(masks.images or []):
         write_png(out_dir / "masks" / f"mask2d_view{v:02d}.png", img.astype(np.uint8) * 255)
-    if masks.images:
+    if masks.images and figures:
         eps = scene.eps.detach().cpu().double().numpy()
         values = [scene.view_image(v, np.linalg.norm(eps[scene.view_slice(v)], axis=-1), np.nan)
                   for v in range(scene.n_views)]
@@ -87,14 +87,14 @@ def write_rig(scene, out_dir: Path) -> None:
                 out_dir / "rig.png")
 
 
-def write_sensing(scene, out_dir: Path, causes: tuple = (), cache_dir=None) -> None:
+def write_sensing(scene, out_dir: Path, causes: tuple = (), cache_dir=None, figures: bool = True) -> None:
     """Each measured view, training and held out: ``sensing/cameraNN_measured.png``, its reference with what the
     measurement stage left out coloured by cause (``causes``: the names of the stage's codes,
     :data:`nerif.sensing.measurement.CAUSES`) and its displacement magnitude; kept in ``cache_dir`` (None: drawn
     every time) keyed by what it shows, so that another run of the same measurement copies it. Realistic sensing,
     per view: the reference and distorted images (8-bit PNG, as a camera would save them) and a figure of images
-    and displacements."""
-    for s in (scene, scene.heldout):
+    and displacements. ``figures``: the figures drawn (the images are data, written either way)."""
+    for s in ((scene, scene.heldout) if figures else ()):
         for view in (s.views if s is not None and causes else ()):
             if view.left_out is None or view.images is None:
                 continue
@@ -117,6 +117,8 @@ def write_sensing(scene, out_dir: Path, causes: tuple = (), cache_dir=None) -> N
         reference, distorted = (to_uint8(im.cpu().numpy()) for im in (view.images.reference, view.images.distorted))
         write_png(out_dir / "sensing" / f"reference_view{v:02d}.png", reference)
         write_png(out_dir / "sensing" / f"distorted_view{v:02d}.png", distorted)
+        if not figures:
+            continue
         u_est = view.measured_px / np.float32(view.images.camera.binning)  # px of the images' grid, as u_true
         save_figure(sensing_figure(reference, distorted, u_true, u_est,
                                    title=f"{view.camera.name}: displacement RMSE of the flow "
@@ -144,10 +146,10 @@ def temperature_std(ambient, sigma: np.ndarray, sigma_std: np.ndarray) -> np.nda
 
 def uncertainty_report(vols: dict, scene) -> dict:
     """``metrics.json``'s uncertainty figures: the median ``T_std`` [K] (``sigma_std`` where no temperature is
-    inferred) over the reconstruction's flame (where ``|sigma|`` exceeds 5 % of its peak), and where a truth is known
+    inferred) over the reconstruction's flame (:func:`nerif.metrics.flame_share_region`), and where a truth is known
     :func:`nerif.metrics.uncertainty_scores` (``uncertainty_`` + its names)."""
     sigma, std = vols["sigma"], vols["sigma_std"]
-    flame = np.abs(sigma) > 0.05 * np.abs(sigma).max() if np.abs(sigma).max() > 0 else np.ones(sigma.shape, bool)
+    flame = flame_share_region(sigma, empty=True)
     out = {"sigma_std_median_flame": float(np.median(std[flame]))}
     if "T_std" in vols:
         out["T_std_median_flame_K"] = float(np.median(vols["T_std"][flame]))
@@ -172,23 +174,24 @@ def camera_file(name: str) -> str:
     return f"camera{int(m.group(1)):02d}" if m else re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_") or "camera"
 
 
-def write_heldout(solver, out_dir: Path) -> dict:
-    """Predictions on every held-out ray: their errors, and per view a figure of observed, predicted and
-    difference (image displacements [px] where deflections are physical, else deflections)."""
+def write_heldout(solver, out_dir: Path, figures: bool = True) -> dict:
+    """Predictions on every held-out ray: their errors, and per view (``figures``) a figure of observed, predicted
+    and difference (image displacements [px] where deflections are physical, else deflections)."""
     ev = solver.evaluation
     pred = ev.heldout_predictions(solver.predict)
     unit = "px" if ev.physical else "sigma"
-    for v, (obs, predicted) in enumerate(ev.heldout_images(pred)):
+    for v, (obs, predicted) in enumerate(ev.heldout_images(pred) if figures else ()):
         cam = ev.scene.heldout.cameras[v]
         save_figure(heldout_figure(obs, predicted, unit=unit, title=f"held out: {cam.name}", block_px=cam.binning),
                     out_dir / "heldout" / f"{camera_file(cam.name)}.png")
     return ev.heldout_errors(solver.predict, every=True, pred=pred)
 
 
-def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float, show=None) -> dict:
-    """Volumes (.npz, .vti), slice, profile and curve PNGs, held-out figures, and the metrics of the final state
-    (the flame's volume: where T is above ``flame_above_K`` [K]); ``show(name, png)``, where given, is shown the
-    slices and profiles as their files hold them (TensorBoard)."""
+def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float, show=None,
+                  figures: bool = True) -> dict:
+    """Volumes (.npz, .vti), slice, profile and curve PNGs, held-out figures (``figures``: drawn, else the data
+    files alone), and the metrics of the final state (the flame's volume: where T is above ``flame_above_K`` [K]);
+    ``show(name, png)``, where given, is shown the slices and profiles as their files hold them (TensorBoard)."""
     amb, box = scene.ambient, scene.box
     vols = dict(solver.volumes())
     sigma = vols["sigma"]
@@ -204,13 +207,14 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float,
     write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, units=VOLUMES, **vols)
     label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
     title = f"{label}, {solver.iteration} iterations"
-    for name, figure in (("slices", slice_figure), ("profiles", profiles_figure)):
+    for name, figure in (("slices", slice_figure), ("profiles", profiles_figure)) if figures else ():
         png = png_bytes(volume_slices(sigma, scene, title, vols.get("sigma_std"), figure))  # drawn once
         atomic_write(out_dir / f"{name}.png", lambda tmp: Path(tmp).write_bytes(png))
         if show is not None:
             show(name, png)
-    save_figure(curves_figure(solver.history, losses, solver.report.get("images_from_iteration"),
-                              "rad" if amb.temperature_known else "sigma"), out_dir / "curves.png")
+    if figures:
+        save_figure(curves_figure(solver.history, losses, solver.report.get("images_from_iteration"),
+                                  "rad" if amb.temperature_known else "sigma"), out_dir / "curves.png")
     final = dict(solver.history[-1]) if solver.history else solver.evaluate()
     final.pop("iteration", None)
     final.update(solver.evaluation.view_misfits(solver.predict))
@@ -219,7 +223,7 @@ def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float,
         log.warning("%s", contradicted)
     failed = ""
     if scene.heldout is not None:
-        final.update(write_heldout(solver, out_dir))  # every held-out ray, not the evaluation subset
+        final.update(write_heldout(solver, out_dir, figures))  # every held-out ray, not the evaluation subset
         final["history_note"] = ("history follows the errors on a fixed subset of rays (metrics.eval_rays_per_view "
                                  "per view); the final heldout_* figures use every held-out ray")
         failed = solver.evaluation.failed(final)

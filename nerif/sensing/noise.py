@@ -18,12 +18,12 @@ BLUR_WIDTHS = 4.0  # brightness and gain are taken as smooth over this many text
 MAD_TO_STD = 1.4826  # a Gaussian's standard deviation per median absolute deviation
 TILE_PX = 512  # images larger than TILES tiles of this size are read on the tiles that hold the most usable pixels
 TILES = 16
-LOWPASS_PX = 1.5  # both exposures blurred by a Gaussian of this width [px] before they are compared: what a
+LOWPASS_PX = 2.0  # both exposures blurred by a Gaussian of this width [px] before they are compared: what a
 # sub-pixel shift leaves of a pattern sharper than its pixels (aliasing, which no reading between the pixels undoes:
 # 0.4 % of full scale for each 0.1 px of shake on a Poisson-disk pattern) lies above it; the share of a white
-# noise's variance that passes is measured (:func:`_white_share`) and divided out. 2 px: the realistic chain with
-# every dirt 1.21x -> 1.12x its clean sigma error, the dirty capture 0.1113 -> 0.1104, measured on 3 of the 13
-# independent captures only: not the default until all are (benchmarks/RESULTS.md, issue 70)
+# noise's variance that passes is measured (:func:`_white_share`) and divided out. Against 1.5 px, on nerif's chain
+# with 1 % sensor noise every dirt together 1.11x -> 1.08x its clean sigma error, on the 13 independent captures a
+# geometric mean of 0.999, the peak's mean error unchanged (benchmarks/RESULTS.md, issue 70)
 
 
 def _residual(distorted: np.ndarray, reference: np.ndarray, u: np.ndarray, width_px: float) -> np.ndarray:

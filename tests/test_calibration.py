@@ -1,4 +1,5 @@
-"""Calibrated cameras (issue 29): OpenCV's intrinsics, distortion and pose, read from a version-3 capture."""
+"""An OpenCV calibration of the cameras (nerif.data.calibration, issue 29): its parts against closed forms and OpenCV,
+and OpenCV's intrinsics, distortion and pose read from a version-3 capture."""
 from pathlib import Path
 
 import cv2
@@ -181,3 +182,83 @@ def test_a_cameras_list_in_the_rig_file_is_the_calibration_file(tmp_path):
         (listed / RIG_FILE).write_text(yaml.safe_dump({**rig, "cameras": bad}))
         with pytest.raises(ValueError, match=r"rig.yaml: cameras\[4\]: " + message):
             read_rig(listed)
+
+
+# --- the module's parts on their own, without the shared capture ---
+
+from nerif.data.calibration import (PITCH_UM, calibrated_camera, calibration_entry, corner_distortion,  # noqa: E402
+                                    plausible, read_calibration)
+
+K0 = np.array([[2600.0, 0.0, 179.5], [0.0, 2610.0, 320.0], [0.0, 0.0, 1.0]])
+
+
+def entry(**changes) -> dict:
+    values = {"image": "distorted_00.png", "reference": "reference_00.png", "image_size": [360, 640],
+              "camera_matrix": K0, "dist_coeffs": [-0.08, 0.02, 1e-4, -2e-4, 0.0], "rvec": [0.02, -0.3, 0.01],
+              "tvec": [5.0, -3.0, 800.0], "pixel_pitch_mm": 0.04, "background_distance_mm": 1600.0}
+    values.update(changes)
+    return values
+
+
+def test_corner_distortion_is_the_radial_factors_closed_form():
+    """k1 alone moves a point at r by k1 r^3: the share k1 r^2 at the farthest corner."""
+    w, h = 360, 640
+    K = np.array([[1000.0, 0, 180], [0, 1000.0, 320], [0, 0, 1]])
+    r2 = (180**2 + 320**2) / 1000.0**2
+    assert corner_distortion(K, np.array([0.1, 0, 0, 0, 0]), (w, h)) == pytest.approx(0.1 * r2, rel=1e-12)
+    assert corner_distortion(K, np.array([0.1, 0.05, 0, 0, 0.01]), (w, h)) == pytest.approx(
+        0.1 * r2 + 0.05 * r2**2 + 0.01 * r2**3, rel=1e-12)
+    assert corner_distortion(K, np.zeros(5), (w, h)) == 0.0
+    assert corner_distortion(K, np.array([-10.0, 0, 0, 0, 0]), (w, h)) == float("inf")  # folds the image over
+
+
+def test_a_value_in_another_unit_names_the_unit():
+    assert plausible(5.5, PITCH_UM, "pitch") == 5.5
+    with pytest.raises(ValueError, match=r"a pitch in millimetres\? 0.0055 mm is 5.5 um"):
+        plausible(0.0055, PITCH_UM, "pitch")
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"camera_matrix": np.eye(3) * [[-1], [1], [1]]}, "fx, fy > 0"),
+    ({"dist_coeffs": [0.1, 0.2]}, "'dist_coeffs' must be"),
+    ({"dist_coeffs": [20.0, 0, 0, 0, 0]}, "move the image's corner by"),
+    ({"rvec": [0, 90, 0]}, "in degrees\\?"),
+    ({"tvec": [1, 2]}, "'tvec' must be 3 finite numbers"),
+    ({"pixel_pitch_mm": -0.04}, "'pixel_pitch_mm' must be a positive length"),
+    ({"background_distance_mm": 1.6}, "a distance in metres"),
+    ({"image": ""}, "lacks 'image'"),
+])
+def test_a_bad_entry_is_one_sentence_naming_the_camera_and_key(change, message):
+    with pytest.raises(ValueError, match=message) as e:
+        calibration_entry(entry(**change), "camera 03", "cal.yml: camera 03")
+    assert str(e.value).startswith("cal.yml: camera 03")
+
+
+def test_a_calibration_file_reads_back_as_written_and_its_camera_projects_as_opencvs(tmp_path):
+    path = tmp_path / "calibration.yml"
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write("n_cameras", 1)
+    for key, v in entry().items():
+        fs.write(f"camera_00_{key}", np.asarray(v, np.float64) if not isinstance(v, (str, float)) else v)
+    fs.release()
+    (c,) = read_calibration(path)
+    assert c["name"] == "camera 00" and c["size"] == (360, 640) and c["pixel_pitch_mm"] == 0.04
+    cam = calibrated_camera(c, f_number=8.0)
+    points = np.random.default_rng(0).uniform(-30, 30, (50, 3))
+    opencv, _ = cv2.projectPoints(points, c["rvec"], c["tvec"], c["K"], c["dist"])
+    # nerif counts a pixel's centre at +0.5 (its corner at 0), OpenCV at 0
+    assert np.allclose(cam.project(points), opencv[:, 0] + 0.5, atol=1e-6)
+    # in focus on the background: the thin lens of the image distance fx * pitch and the background's distance
+    s_i = 2600.0 * 0.04
+    assert cam.focal_mm == pytest.approx(1 / (1 / s_i + 1 / 1600.0))
+
+
+def test_a_file_without_cameras_is_one_sentence(tmp_path):
+    path = tmp_path / "empty.yml"
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write("something", 1)
+    fs.release()
+    with pytest.raises(ValueError, match="lacks 'n_cameras'"):
+        read_calibration(path)
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        read_calibration(tmp_path / "missing.yml")
