@@ -88,6 +88,15 @@ def test_without_figures_a_run_writes_its_data_files_and_no_picture(tmp_path):
     assert not (tmp_path / "bad").exists()
 
 
+def test_an_unreadable_nerif_figures_is_one_sentence_naming_it(tmp_path, monkeypatch):
+    from nerif.app import run
+
+    monkeypatch.setenv("NERIF_FIGURES", "[1,")  # not a value the config's grammar reads
+    with pytest.raises(ValueError, match=r"figures='\[1,': true .* in the environment's NERIF_FIGURES"):
+        run(tiny_config(), tmp_path / "bad")
+    assert not (tmp_path / "bad").exists()
+
+
 def test_multirun_writes_the_summary_table(tmp_path):
     r, sweep, rows = multirun(tmp_path, "train.iterations=6", "train.eval_every=3", "encoder=none,hash",
                               "grad=discrete,hybrid")

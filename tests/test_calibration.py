@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 import yaml
 
+from nerif.data.calibration import (PITCH_UM, calibrated_camera, calibration_entry, corner_distortion, plausible,
+                                    read_calibration)
 from nerif.data.capture import rig_cameras
 from nerif.data.rig_file import RIG_FILE, read_rig
 from nerif.geometry import ProbeBox, rays_in_box
@@ -186,8 +188,6 @@ def test_a_cameras_list_in_the_rig_file_is_the_calibration_file(tmp_path):
 
 # --- the module's parts on their own, without the shared capture ---
 
-from nerif.data.calibration import (PITCH_UM, calibrated_camera, calibration_entry, corner_distortion,  # noqa: E402
-                                    plausible, read_calibration)
 
 K0 = np.array([[2600.0, 0.0, 179.5], [0.0, 2610.0, 320.0], [0.0, 0.0, 1.0]])
 
