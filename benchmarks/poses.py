@@ -31,6 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from ablation import cell_folder, header, run_arguments, run_cells, write_report  # noqa: E402
 from calibrated import multicam_folder  # noqa: E402
+from nerif.data.diagnostics import least_unseen_view  # noqa: E402
 from nerif.data.rig_file import read_rig  # noqa: E402
 from nerif.data.scene import heldout_views  # noqa: E402
 from nerif.write_capture import write_calibration  # noqa: E402
@@ -52,7 +53,7 @@ def disturbed_capture(src: Path, dst: Path, angle_deg: float, distance_mm: float
     rig = read_rig(src)
     cams = rig.cameras()
     V = len(cams)
-    held = heldout_views([V - 1] if rig.heldout is None else list(rig.heldout), V)
+    held = heldout_views([least_unseen_view(cams)] if rig.heldout is None else list(rig.heldout), V)
     train = [v for v in range(V) if v not in held]
     rng = np.random.default_rng(seed)
     turn, move = rng.uniform(-angle_deg, angle_deg, V), rng.uniform(-distance_mm, distance_mm, V)

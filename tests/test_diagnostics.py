@@ -106,6 +106,21 @@ def test_the_widest_gap_of_viewing_directions_is_the_arcs_missing_wedge(n, span,
     assert widest_gap_deg(arc_rig(angles_deg=[0.0, 180.0, 360.0])) == pytest.approx(180.0)  # one line of sight
 
 
+@pytest.mark.parametrize("n, span, held, gap", [(9, 120.0, 7, 60.0), (9, 160.0, 8, 40.0), (12, 165.0, 11, 30.0),
+                                                (7, 90.0, 5, 90.0), (3, 120.0, 2, 120.0)])
+def test_the_view_held_out_by_default_widens_the_missing_wedge_least(n, span, held, gap):
+    """On an arc narrower than 180 degrees an end view borders the wedge: 9 views over 120 degrees less the last
+    leave 75 degrees unseen, less an interior view the arc's 60 (the last interior one, 7, is held out). An arc
+    spread over 180 degrees loses one spacing wherever a view is held out: the last. 7 over 90 degrees: 105 -> 90;
+    3 over 120 degrees: every view ties at 120."""
+    from nerif.data.diagnostics import least_unseen_view, widest_gap_deg
+    from nerif.geometry.camera import arc_rig
+
+    cams = arc_rig(n, span)
+    assert least_unseen_view(cams) == held
+    assert widest_gap_deg(cams[:held] + cams[held + 1:]) == pytest.approx(gap, abs=1e-6)
+
+
 def test_a_rig_turned_out_of_its_plane_has_the_same_wedge():
     """The gap does not depend on how the rig sits: the arc's cameras rotated about x by 35 degrees and about y by
     50 keep 9-over-120's 60 degrees."""

@@ -24,7 +24,7 @@ from nerif.data.capture_images import capture_files, check_images, lossy_images,
 from nerif.data.folders import blocks_inside, dataset_folder, read_truth, region_of_interest, resolve_binning
 from nerif.data.frames import FRAMES, Frame, pick_frames
 from nerif.data.rig_file import RigFile, read_rig
-from nerif.data.diagnostics import box_fills_frame, screened
+from nerif.data.diagnostics import box_fills_frame, least_unseen_view, screened
 from nerif.data.scene import (DATASETS, Scene, ViewImages, heldout_views,
                               scene_from_displacements)
 from nerif.geometry import Camera, outside_the_box, rays_in_box
@@ -172,7 +172,8 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
             :data:`nerif.sensing.measurement.MEASUREMENT` config (None: the default stage).
         binning: b x b sensor pixels averaged into one ray (the ray grid); ``auto``: about one ray per voxel
             across at the probe (:func:`nerif.geometry.ray_binning`), logged.
-        heldout: views never trained on (overrides the rig file's ``heldout``; default: the last view).
+        heldout: views never trained on (overrides the rig file's ``heldout``; default: the view whose absence
+            leaves the fewest directions unseen, :func:`nerif.data.diagnostics.least_unseen_view`).
         frames: the frames of a time series (:func:`capture_frames`); ``frame``: the one to build (None: the
             first of the folder).
         truth: a volume file of the true temperature [K] on the probe grid, for a rendered capture (its array
@@ -196,7 +197,7 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
     quiet = outside_the_box(cameras, rays[2], rays[3])
     box_fills_frame(cameras, quiet, roi, rig.box, str(rig.path))  # a scale off by a factor, before any image is read
     held = (heldout_views(heldout, len(cameras), "data.heldout") if heldout is not None else
-            heldout_views([len(cameras) - 1] if rig.heldout is None else list(rig.heldout), len(cameras),
+            heldout_views([least_unseen_view(cameras)] if rig.heldout is None else list(rig.heldout), len(cameras),
                           f"{rig.path}: heldout"))
     prior = sigma_prior(rig, rig.ambient)
     truth_T = read_truth(truth, rig.box) if truth is not None else None

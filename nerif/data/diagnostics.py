@@ -37,6 +37,7 @@ WEDGE_DEG = 45.0  # the widest gap of viewing directions [deg] beyond which a ru
                  # exact deflections, 9 views over 120 deg (a 60 deg gap) read two flames' peaks 7 and 14 % cold, 9
                  # over 160 deg (20 deg) 5 and 3 %, 18 over 170 deg 2.5 % (benchmarks/RESULTS.md, issue 66); 9 over
                  # 160 deg less a held-out view at an end leave 40 deg
+GAP_TIE_DEG = 1.0  # widest gaps within this [deg] of each other are one (the held-out view: the last of them)
 RADIANS_DEG = 6.5  # a span below this [deg] is what angles of a wide arc given in radians look like (0 to 2.6 rad)
 KNOCKED_PX = 1.0  # a shake larger than this [px of the full sensor] and than its flame's displacements: knocked
 CLIPPED = 0.10  # a view with more of its pixels at full scale than this is said to clip: nerif's own chain clips the
@@ -262,6 +263,18 @@ def widest_gap_deg(cameras: list[Camera]) -> float:
     v = np.cross(normal, u)
     azimuth = np.sort(np.rad2deg(np.arctan2(axes @ v, axes @ u)) % 180.0)
     return float(np.diff(np.append(azimuth, azimuth[0] + 180.0)).max())
+
+
+def least_unseen_view(cameras: list[Camera]) -> int:
+    """The view to hold out by default: the one whose absence leaves the training views' widest gap of directions
+    (:func:`widest_gap_deg`) narrowest, the last of those within :data:`GAP_TIE_DEG` of it (on an arc spread over
+    180 degrees every view ties: the last). On an arc narrower than 180 degrees its end views border the missing
+    wedge; holding out one of them widens the wedge by a spacing (9 views over 120 degrees: 60 -> 75), an interior
+    view leaves it as it was."""
+    if len(cameras) < 3:
+        return len(cameras) - 1
+    gaps = [widest_gap_deg(cameras[:v] + cameras[v + 1:]) for v in range(len(cameras))]
+    return max(v for v, g in enumerate(gaps) if g <= min(gaps) + GAP_TIE_DEG)
 
 
 def missing_wedge(scene) -> list[str]:

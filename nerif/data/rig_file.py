@@ -65,7 +65,8 @@ class RigFile:
         frames: the instants, each with V distorted images (as ``references``).
         roi_px: (x, y, width, height) the region of interest on the sensor [px].
         box: the probe box. ambient: T0, n0 and T_max of the gas around the flame.
-        heldout: the views never trained on (None: the default, the last view).
+        heldout: the views never trained on (None: the default,
+            :func:`nerif.data.diagnostics.least_unseen_view`).
         temperature_range_K: (low, high) the temperatures the flame lies within, or None.
         lens: the camera model of an arc (versions 1, 2), else None.
         calibrated: the calibrated cameras (version 3, full sensor), else None.
