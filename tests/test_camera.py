@@ -73,3 +73,18 @@ def test_pixels_per_mm_is_the_image_scale_across_the_line_of_sight():
     uv = cam.project(np.stack([point - 0.05 * across, point + 0.05 * across]))
     assert cam.pixels_per_mm(point) == pytest.approx(np.linalg.norm(uv[1] - uv[0]) / 0.1, rel=1e-3)
     assert cam.binned(2).pixels_per_mm(point) == pytest.approx(cam.pixels_per_mm(point) / 2)
+
+
+def test_the_rig_axis_is_the_normal_of_the_plane_its_views_turn_in_pointing_up():
+    """An arc turns about +y; the same arc rotated about x by 35 degrees turns about the rotated y (sign kept up),
+    whatever the order of its views."""
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+
+    from nerif.geometry import arc_rig, rig_axis
+
+    np.testing.assert_allclose(rig_axis(arc_rig(9, 120.0)), [0.0, 1.0, 0.0], atol=1e-12)
+    turn = Rotation.from_euler("x", 35, degrees=True).as_matrix()
+    cams = [replace(c, rotation=turn @ np.asarray(c.rotation)) for c in arc_rig(9, 160.0)[::-1]]
+    np.testing.assert_allclose(rig_axis(cams), turn @ [0.0, 1.0, 0.0], atol=1e-12)

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from nerif.data.scene import Scene, views_of
-from nerif.geometry import arc_rig, rays_in_box
+from nerif.geometry import arc_rig, rays_in_box, rig_axis
 from nerif.solvers.poses import POSES, RefinedPoses, rotation_matrices
 from tests.helpers import AMBIENT, BOX, analytic
 
@@ -57,6 +57,34 @@ def test_turns_put_in_are_recovered_against_the_true_field_and_a_true_rig_stays(
     assert poses.report()["pose_rotation_max_deg"] < 3.1 and "pose_warning" not in poses.report()
 
 
+def test_the_tilts_are_left_as_given_unless_asked_and_found_when_asked():
+    """A rig whose cameras are tilted (rotated about the horizontal axis across each one's line of sight, about the
+    probe centre) by 1.5 degrees one way or the other, their turns right: by default (turn and shift) no rotation
+    off the rig's axis is made; with ``components=[turn, tilt, shift]`` the tilts are found."""
+    tilts = [1.5, -1.5, 1.5, -1.5, 1.5, -1.5, 1.5, -1.5]
+    true = arc_rig(n_cameras=8, span_deg=160.0, binning=40)
+    across = [np.asarray(c.rotation)[:, 0] for c in true]  # each camera's image right: a tilt's axis
+    R = [torch.tensor(rotation_matrices(torch.tensor(np.radians(a) * ax)[None])[0].numpy()) for a, ax in zip(tilts, across)]
+    given = [replace(c, position=(r.numpy() @ c.position), rotation=r.numpy() @ np.asarray(c.rotation))
+             for c, r in zip(true, R)]
+    origins, dirs, pixel, starts = rays_in_box(BOX, given)
+    eps = torch.cat([analytic(torch.as_tensor(true[v].position, dtype=torch.float64).expand(int(starts[v + 1] - starts[v]), 3),
+                              dirs[starts[v]:starts[v + 1]].double() @ R[v]) @ R[v].T for v in range(8)])
+    scene = Scene(box=BOX, ambient=AMBIENT, views=views_of(given), origins=origins, dirs=dirs,
+                  eps=(eps * AMBIENT.delta_thre).float(), pixel=pixel, view_start=starts, perpendicular_only=True)
+    kept = RefinedPoses().setup(scene, 100)
+    found = RefinedPoses(components=["turn", "tilt", "shift"]).setup(scene, 100)
+    for _ in range(3):
+        kept.fit(analytic)
+        found.fit(analytic)
+    axis = torch.as_tensor(rig_axis(given))  # the tilted axes leave it 0.002 deg off y
+    off_axis = kept.omega - (kept.omega @ axis)[:, None] * axis
+    assert off_axis.abs().max() < 1e-12
+    expected = -np.radians(tilts)[:, None] * np.stack(across)
+    expected -= expected.mean(0)  # the gauge: the rig's mean frame stays
+    np.testing.assert_allclose(np.degrees(found.omega.numpy()), np.degrees(expected), atol=0.05)
+
+
 def test_moved_rays_render_the_field_as_the_camera_measured_it_and_other_rays_as_given():
     turns = [2.0, -3.0, 1.5, -1.0, 3.0, -2.5, 0.5, -0.5]
     scene = given_scene(turns)
@@ -83,13 +111,16 @@ def test_the_poses_are_kept_in_a_checkpoint_and_given_poses_change_nothing():
     given = POSES.build({"name": "given"}).setup(scene, 100)
     o, d, turn = given.rays(scene.origins[:1], scene.dirs[:1])
     assert turn is None and o is not None and given.report() == {}
-    assert poses.due(25) and poses.due(50) and poses.due(75) and not poses.due(24)
+    assert all(poses.due(10 * k) for k in range(1, 9)) and not poses.due(25) and not poses.due(90)
+    assert again.free.tolist() == poses.free.tolist() and poses.free[:2].all()  # the views found off stay free
 
 
 @pytest.mark.parametrize("settings, message", [
     ({"at": [0.5, 1.0]}, r"poses.at=\[0.5, 1.0\]: shares of the run's iterations"),
     ({"bound_deg": -1.0}, r"poses.bound_deg=-1.0: a positive number"),
     ({"steps": 0}, r"poses.steps=0"),
+    ({"components": ["turn", "spin"]}, r"poses.components=\['turn', 'spin'\]: a non-empty list of turn, tilt, shift"),
+    ({"components": []}, r"poses.components=\[\]: a non-empty list"),
 ])
 def test_impossible_settings_are_one_sentence(settings, message):
     with pytest.raises(ValueError, match=message):
@@ -119,6 +150,6 @@ def test_a_run_with_refined_poses_fits_them_during_training_and_reports_them_per
     cfg = tiny_config("poses=refined", "poses.rays_per_view=32")
     s = solver(cfg, DATASETS.build(group(cfg, "data")))
     s.fit(checkpoint_every=10**9, progress=False)
-    assert s.poses.fits == 3  # after 5, 10 and 15 of the 20 iterations
+    assert s.poses.fits == 8  # after 2, 4, ..., 16 of the 20 iterations
     assert len(s.report["pose_angle_deg"]) == s.scene.n_views == 6
     assert len(s.report["pose_translation_mm"][0]) == 3 and s.report["poses"] == "refined"

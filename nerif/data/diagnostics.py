@@ -19,7 +19,7 @@ import logging
 import numpy as np
 
 from nerif.data.scene import Scene
-from nerif.geometry import Camera
+from nerif.geometry import Camera, rig_axis
 from nerif.sensing.findings import Findings
 
 log = logging.getLogger(__name__)
@@ -257,7 +257,7 @@ def widest_gap_deg(cameras: list[Camera]) -> float:
     missing wedge of limited-angle tomography. The axes' azimuths about the normal of the plane they lie nearest
     (the axis the rig turns about), sorted over 180 degrees; 180 for cameras that all look one way."""
     axes = np.stack([np.asarray(c.rotation, dtype=np.float64)[:, 2] for c in cameras])
-    normal = np.linalg.eigh(axes.T @ axes)[1][:, 0]  # the direction the axes have least of
+    normal = rig_axis(cameras)
     u = np.cross(normal, axes[np.argmax(np.linalg.norm(np.cross(normal, axes), axis=1))])
     u /= np.linalg.norm(u)
     v = np.cross(normal, u)

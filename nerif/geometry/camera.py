@@ -200,6 +200,14 @@ def camera_from_nerf_pose(c2w, focal_px: float, width: int, height: int, cx: flo
                   float(f_number), float(background_mm), float(focal_mm), name=name)
 
 
+def rig_axis(cameras: list[Camera]) -> np.ndarray:
+    """(3,) the unit axis a rig turns about: the normal of the plane its viewing axes lie nearest (the direction
+    they have least of), pointing up (+y) where it is not horizontal. A rotating burner's: its vertical axis."""
+    axes = np.stack([np.asarray(c.rotation, dtype=np.float64)[:, 2] for c in cameras])
+    normal = np.linalg.eigh(axes.T @ axes)[1][:, 0]
+    return -normal if normal[1] < 0 else normal
+
+
 def look_at_origin(position: np.ndarray) -> np.ndarray:
     """Camera-to-world rotation of a camera at ``position`` looking at the origin, image rows along -y."""
     forward = -np.asarray(position, dtype=np.float64)
