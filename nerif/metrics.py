@@ -128,6 +128,14 @@ def voxel_volume_cm3(axes: list) -> float:
     return float(np.prod([abs(a[1] - a[0]) if len(a) > 1 else 1.0 for a in axes])) / 1000.0
 
 
+def temperature_std(ambient, sigma: np.ndarray, sigma_std: np.ndarray) -> np.ndarray:
+    """The standard deviation of T [K] (nx, ny, nz) of one of sigma, ``sigma_std`` (nx, ny, nz), to first order:
+    ``|dT/dsigma| sigma_std`` (``ambient``: :class:`nerif.physics.Ambient`)."""
+    h = 1e-4
+    slope = (ambient.temperature_from_sigma(sigma + h) - ambient.temperature_from_sigma(sigma - h)) / (2 * h)
+    return np.abs(slope) * sigma_std
+
+
 def temperature_figures(T: np.ndarray, axes: list, hot_K: float, T_true: np.ndarray | None = None) -> dict:
     """What a combustion researcher reports of a temperature field ``T`` (nx, ny, nz) [K] on voxel centres ``axes``
     (x, y, z [mm]): its peak ``T_peak_K`` and where it lies ``T_peak_position_mm`` (x, y, z), and the flame's

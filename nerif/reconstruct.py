@@ -17,8 +17,10 @@ from nerif.configs import group
 from nerif.data import DATASETS
 from nerif.data.diagnostics import check_sign, ill_posed, missing_wedge
 from nerif.export import write_json
-from nerif.io.outputs import RESULTS, summary_line, volume_slices, write_masks, write_outputs, write_rig, write_sensing
+from nerif.io.outputs import (RESULTS, summary_line, volume_slices, write_figures, write_masks, write_rig, write_sensing,
+                              write_volumes)
 from nerif.masks import MASKS
+from nerif.results import final_volumes, results
 from nerif.sensing.measurement import CAUSES
 from nerif.solvers import SOLVERS, Interrupted
 from nerif.solvers.base import stop_signals
@@ -195,8 +197,15 @@ def _write(solver, scene, out_dir: Path, board: Board, cfg: DictConfig, device: 
     checkpoint = out_dir / "checkpoint.pt"
     try:
         try:
-            metrics = write_outputs(solver, scene, out_dir, board.losses, flame_above_K=cfg.metrics.flame_above_K,
-                                    show=board.show, figures=cfg.figures)
+            volumes = final_volumes(solver, scene)
+            write_volumes(volumes, scene, out_dir)  # first: what the run made is kept whatever comes after
+            found = results(solver, scene, volumes, flame_above_K=cfg.metrics.flame_above_K, figures=cfg.figures)
+            if cfg.figures:
+                label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
+                write_figures(found, scene, out_dir, solver.history, board.losses,
+                              f"{label}, {solver.iteration} iterations", solver.report.get("images_from_iteration"),
+                              show=board.show)
+            metrics = found.metrics
         finally:
             board.close()
         about = dict(about or {})

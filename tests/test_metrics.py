@@ -4,7 +4,10 @@ import numpy as np
 import pytest
 import torch
 
-from nerif.metrics import deflection_rmse, flame_region, rmse
+from nerif.metrics import deflection_rmse, flame_region, rmse, temperature_std
+from nerif.physics import Ambient
+
+AMB = Ambient(T0=300.0, n0=1.00027, T_max=2000.0)
 
 
 def test_rmse_and_flame_region():
@@ -158,3 +161,12 @@ def test_a_fields_flame_is_where_its_magnitude_passes_a_share_of_its_peak():
     assert flame_share_region(sigma).tolist() == [False, False, True, True, True]
     assert flame_share_region(sigma, 0.5).tolist() == [False, False, False, True, False]
     assert not flame_share_region(np.zeros(3)).any() and flame_share_region(np.zeros(3), empty=True).all()
+
+
+def test_a_temperatures_standard_deviation_is_sigmas_times_the_slope_of_t():
+    """Air, sigma = -1 at T_max: T = T0 / (1 + k sigma), k = 1 - T0 / T_max, so |dT/dsigma| = T0 k / (1 + k sigma)^2."""
+    sigma, std = np.array([-0.9, -0.5, 0.0]), np.array([0.01, 0.02, 0.03])
+    k = 1 - AMB.T0 / AMB.T_max
+    slope = AMB.T0 * k / (1 + k * sigma) ** 2
+    np.testing.assert_allclose(AMB.temperature_from_sigma(sigma), AMB.T0 / (1 + k * sigma), rtol=1e-6)
+    np.testing.assert_allclose(temperature_std(AMB, sigma, std), slope * std, rtol=1e-6)

@@ -1,50 +1,26 @@
 """Every file a reconstruction writes: the volumes (``.npz``, ``.vti``), the masks, the sensing record, slice and
 curve images, the held-out views' figures, the final metrics, and the one summary line a run prints.
 
-The writers take a finished solver (its ``reconstruction()``, ``history``, ``evaluation``, ``timing()``) and
-its scene; they compute no score of their own: :class:`nerif.evaluation.Evaluation` does.
+The writers take what a run computed (its :class:`nerif.results.Results`, its masks, its scene) and compute no
+score of their own; they call nothing of the solver's.
 """
 from __future__ import annotations
 
-import logging
 import re
 from pathlib import Path
 from typing import Optional
 
 import matplotlib
 import numpy as np
-import torch
 
 import nerif.io.plots as plots
 from nerif.cache import cached_arrays, content_digest, source_digest
 from nerif.export import atomic_write, to_uint8, write_npz, write_png, write_vti
-from nerif.metrics import (flame_share_region, reported_intervals, resolved_peak_figures, temperature_figures,
-                           uncertainty_scores, within_intervals)
-from nerif.resolution import effective_resolution_mm, resolved_peak
+from nerif.metrics import temperature_std
 from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
                              profiles_figure, rig_figure, save_figure, sensing_figure, slice_figure)
-from nerif.units import SHARE, SIGMA, VOLUMES, declare
+from nerif.units import VOLUMES
 
-log = logging.getLogger(__name__)
-
-INSIDE = "1 (1: the true figure lies in its interval, 0: it does not)"
-declare(T_peak_interval_K="K (the peak's 2-standard-deviation interval: [cold, hot])",
-        T_peak_position_interval_mm="mm (per axis [lo, hi]: the box of the voxels that could be the hottest)",
-        flame_volume_interval_cm3="cm^3 (the flame volume's 2-standard-deviation interval: [least, most])",
-        T_peak_in_interval=INSIDE, T_peak_position_in_interval=INSIDE, flame_volume_in_interval=INSIDE,
-        T_peak_field_K="K (the field's hottest voxel, before the resolution's correction)",
-        T_peak_resolution_K="K (what the run's resolution took off the peak: T_peak_K - T_peak_field_K)",
-        resolution_mm="mm (standard deviation of the Gaussian blur of the field's finest cell and the rays' spacing)",
-        T_peak_resolved="1 (1: the hot core is wider than the resolution; 0: about as fine, T_peak_K the field's own)")
-declare(uncertainty_coverage_1sigma=SHARE, uncertainty_coverage_2sigma=SHARE, uncertainty_coverage_2sigma_core=SHARE,
-        uncertainty_spearman="1 (rank correlation)",
-        uncertainty_ause="1 (area under the sparsification error, of sigma)",
-        uncertainty_ause_random="1 (the same for a random order)",
-        uncertainty_calibration_error="1 (mean |observed - nominal| coverage at 10 levels from 0.1 to 0.95)",
-        sigma_std_median_flame=SIGMA,
-        ray_binning="px (sensor pixels across a ray)", shake_px_max="px (of the full sensor)",
-        text=("temperature_note", "deflection_unit", "history_note"),
-        containers={"measurement": "(per camera name: its findings, each unit by its name here)"})
 # the files every run writes (held-out figures, masks and sensing pictures beside them where there are any)
 RESULTS = ("reconstruction.npz", "reconstruction.vti", "slices.png", "profiles.png", "curves.png", "metrics.json")
 
@@ -137,30 +113,6 @@ def volume_slices(sigma: np.ndarray, scene, title: str, sigma_std: Optional[np.n
     return figure(scene.ambient.temperature_from_sigma(sigma), scene.box, scene.truth_T, title, std=std)
 
 
-def temperature_std(ambient, sigma: np.ndarray, sigma_std: np.ndarray) -> np.ndarray:
-    """The standard deviation of T [K] of one of sigma, to first order: ``|dT/dsigma| sigma_std``."""
-    h = 1e-4
-    slope = (ambient.temperature_from_sigma(sigma + h) - ambient.temperature_from_sigma(sigma - h)) / (2 * h)
-    return np.abs(slope) * sigma_std
-
-
-def uncertainty_report(vols: dict, scene) -> dict:
-    """``metrics.json``'s uncertainty figures: the median ``T_std`` [K] (``sigma_std`` where no temperature is
-    inferred) over the reconstruction's flame (:func:`nerif.metrics.flame_share_region`), and where a truth is known
-    :func:`nerif.metrics.uncertainty_scores` (``uncertainty_`` + its names)."""
-    sigma, std = vols["sigma"], vols["sigma_std"]
-    flame = flame_share_region(sigma, empty=True)
-    out = {"sigma_std_median_flame": float(np.median(std[flame]))}
-    if "T_std" in vols:
-        out["T_std_median_flame_K"] = float(np.median(vols["T_std"][flame]))
-        hottest = np.unravel_index(np.argmax(vols["T"]), sigma.shape)  # the voxel of T_peak_K
-        out["T_std_at_peak_K"] = float(vols["T_std"][hottest])
-    if scene.truth_T is not None:
-        truth = scene.ambient.sigma_from_temperature(scene.truth_T)
-        out.update({f"uncertainty_{k}": v for k, v in uncertainty_scores(sigma, std, truth).items()})
-    return out
-
-
 def rig_index(name: str, default: int) -> int:
     """A camera's place in the rig from its name (``camera 8 (160.0 deg)`` -> 8), else ``default``."""
     m = re.match(r"camera (\d+)", name)
@@ -174,123 +126,35 @@ def camera_file(name: str) -> str:
     return f"camera{int(m.group(1)):02d}" if m else re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_") or "camera"
 
 
-def write_heldout(solver, out_dir: Path, figures: bool = True) -> dict:
-    """Predictions on every held-out ray: their errors, and per view (``figures``) a figure of observed, predicted
-    and difference (image displacements [px] where deflections are physical, else deflections)."""
-    ev = solver.evaluation
-    pred = ev.heldout_predictions(solver.predict)
-    unit = "px" if ev.physical else "sigma"
-    for v, (obs, predicted) in enumerate(ev.heldout_images(pred) if figures else ()):
-        cam = ev.scene.heldout.cameras[v]
-        save_figure(heldout_figure(obs, predicted, unit=unit, title=f"held out: {cam.name}", block_px=cam.binning),
-                    out_dir / "heldout" / f"{camera_file(cam.name)}.png")
-    return ev.heldout_errors(solver.predict, every=True, pred=pred)
-
-
-def write_outputs(solver, scene, out_dir: Path, losses, *, flame_above_K: float, show=None,
-                  figures: bool = True) -> dict:
-    """Volumes (.npz, .vti), slice, profile and curve PNGs, held-out figures (``figures``: drawn, else the data
-    files alone), and the metrics of the final state (the flame's volume: where T is above ``flame_above_K`` [K]);
-    ``show(name, png)``, where given, is shown the slices and profiles as their files hold them (TensorBoard)."""
+def write_volumes(volumes: dict, scene, out_dir: Path) -> None:
+    """A run's volumes (``volumes``: name -> (nx, ny, nz), :func:`nerif.results.final_volumes`) as
+    ``reconstruction.npz`` and ``reconstruction.vti``, with the grid and the ambient gas."""
     amb, box = scene.ambient, scene.box
-    vols = dict(solver.volumes())
-    sigma = vols["sigma"]
-    if amb.temperature_known:
-        vols.update(T=amb.temperature_from_sigma(sigma), n=amb.n_from_sigma(sigma), delta=sigma * amb.delta_thre)
-        if "sigma_std" in vols:
-            vols["T_std"] = temperature_std(amb, sigma, vols["sigma_std"])
-    if scene.truth_T is not None:
-        vols["T_true"] = scene.truth_T
     origin = [float(a[0]) for a in box.axes()]
     write_npz(out_dir / "reconstruction.npz", units=VOLUMES, voxel_mm=box.voxel_mm, origin_mm=np.asarray(origin),
-              T0=amb.T0, n0=amb.n0, delta_thre=amb.delta_thre, **vols)
-    write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, units=VOLUMES, **vols)
-    label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
-    title = f"{label}, {solver.iteration} iterations"
-    for name, figure in (("slices", slice_figure), ("profiles", profiles_figure)) if figures else ():
-        png = png_bytes(volume_slices(sigma, scene, title, vols.get("sigma_std"), figure))  # drawn once
+              T0=amb.T0, n0=amb.n0, delta_thre=amb.delta_thre, **volumes)
+    write_vti(out_dir / "reconstruction.vti", box.voxel_mm, origin, units=VOLUMES, **volumes)
+
+
+def write_figures(results, scene, out_dir: Path, history: list, losses, title: str,
+                  images_from: Optional[int] = None, show=None) -> None:
+    """A run's pictures: the slices and profiles of its :class:`~nerif.results.Results` (``title``), its curves
+    (``history``, ``losses``; ``images_from``: the iteration the images' stage began at) and each held-out view's
+    figure; ``show(name, png)``, where given, is shown the slices and profiles as their files hold them
+    (TensorBoard)."""
+    vols = results.volumes
+    for name, figure in (("slices", slice_figure), ("profiles", profiles_figure)):
+        png = png_bytes(volume_slices(vols["sigma"], scene, title, vols.get("sigma_std"), figure))  # drawn once
         atomic_write(out_dir / f"{name}.png", lambda tmp: Path(tmp).write_bytes(png))
         if show is not None:
             show(name, png)
-    if figures:
-        save_figure(curves_figure(solver.history, losses, solver.report.get("images_from_iteration"),
-                                  "rad" if amb.temperature_known else "sigma"), out_dir / "curves.png")
-    final = dict(solver.history[-1]) if solver.history else solver.evaluate()
-    final.pop("iteration", None)
-    final.update(solver.evaluation.view_misfits(solver.predict))
-    contradicted = solver.evaluation.contradicted(final)
-    if contradicted:
-        log.warning("%s", contradicted)
-    failed = ""
-    if scene.heldout is not None:
-        final.update(write_heldout(solver, out_dir, figures))  # every held-out ray, not the evaluation subset
-        final["history_note"] = ("history follows the errors on a fixed subset of rays (metrics.eval_rays_per_view "
-                                 "per view); the final heldout_* figures use every held-out ray")
-        failed = solver.evaluation.failed(final)
-        for said in (failed, "" if failed else solver.evaluation.unexplained(final)):
-            if said:
-                log.warning("%s", said)
-    if not amb.temperature_known:
-        final["deflection_unit"] = "sigma (the data are deflections of sigma; no temperature is inferred)"
-    final.update(solver.timing())
-    final["wall_time_s"] = solver.train_seconds
-    final["history"] = solver.history
-    final.update(solver.labels)
-    final["ray_binning"] = int(scene.cameras[0].binning)  # sensor pixels across a ray
-    final.update(solver.report)
-    final.update(solver.saturation(sigma, failed))
-    lowest = solver.interval[0] if hasattr(solver, "interval") else float(sigma.min())
-    resolution = effective_resolution_mm(solver.cell_mm, scene.ray_spacing_mm)
-    if amb.temperature_known:
-        final.update(temperature_figures(vols["T"], box.axes(), flame_above_K, scene.truth_T))
-        peak = resolved_peak(sigma, resolution, box.voxel_mm, lowest, correct=scene.displacements is not None)
-        final.update(resolved_peak_figures(peak, amb.temperature_from_sigma, final.get("T_peak_true_K")))
-        if not peak.resolved:
-            said = unresolved_words(final)
-            log.warning("%s", said)
-            final["warnings"] = [*final.get("warnings", []), said]
-    if "sigma_std" in vols:
-        final.update(uncertainty_report(vols, scene))
-        if amb.temperature_known:
-            final.update(reported_intervals(sigma, vols["sigma_std"], amb.temperature_from_sigma, box.axes(),
-                                            flame_above_K, lowest, blur_vox=resolution / box.voxel_mm))
-            final.update(within_intervals(final))
-    if scene.sensing is not None:
-        final.update(scene.sensing.report())
-    final.update(measurement_report(scene, solver.shakes_px()))
-    if amb.temperature_known:
-        final["temperature_note"] = ("temperature from n assuming an air-dominated gas of fixed composition "
-                                     "(n - 1 = T0 (n0 - 1) / T)")
-    return final
-
-
-def measurement_report(scene, refined: Optional[torch.Tensor] = None) -> dict:
-    """What the measurement stage found in every view, training and held out (``measurement``: camera name ->
-    its figures), and the largest shake taken off any view (``shake_px_max``, px of the full sensor); empty for
-    data not measured from images. ``refined``: (V, 2) the training views' shakes as the fit refined them [px of
-    the full sensor] (``shake_refined_px`` beside the measured ``shake_px``), or None."""
-    per_view = {}
-    for s in (scene, scene.heldout):
-        if s is not None and s.findings:
-            for cam, found in zip(s.cameras, s.findings):
-                per_view[cam.name] = found.report()
-    if not per_view:
-        return {}
-    if refined is not None:
-        for cam, shake in zip(scene.cameras, refined.tolist()):
-            per_view[cam.name]["shake_refined_px"] = [float(x) for x in shake]
-            log.info("%s: shake refined with the field to (%+.3f, %+.3f) px (measured (%+.3f, %+.3f))", cam.name,
-                     *shake, *per_view[cam.name]["shake_px"])
-    shakes = [float(np.hypot(*f["shake_px"])) for f in per_view.values() if "shake_px" in f]
-    return {"measurement": per_view, **({"shake_px_max": max(shakes)} if shakes else {})}
-
-
-def unresolved_words(m: dict) -> str:
-    """The sentence for a hot core about as fine as the run resolves (:mod:`nerif.resolution`)."""
-    return (f"the hottest core is about as fine as this run resolves ({m['resolution_mm']:.2f} mm, from the field's "
-            f"finest cell and the rays' spacing), or a spike where streaks of a few views cross: its peak, "
-            f"{m['T_peak_K']:.0f} K as the field reads it, cannot be read more closely (a core that fine reads cold); "
-            "finer rays (data.binning) or a finer field (field.finest_resolution) resolve it where the data carry it")
+    save_figure(curves_figure(history, losses, images_from, "rad" if scene.ambient.temperature_known else "sigma"),
+                out_dir / "curves.png")
+    for view in results.heldout:
+        cam = view.camera
+        save_figure(heldout_figure(view.observed, view.predicted, unit=results.heldout_unit,
+                                   title=f"held out: {cam.name}", block_px=cam.binning),
+                    out_dir / "heldout" / f"{camera_file(cam.name)}.png")
 
 
 def temperature_words(m: dict) -> str:

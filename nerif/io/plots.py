@@ -373,6 +373,33 @@ def _box_edges(box: ProbeBox) -> np.ndarray:
     return np.stack([corners[[a, b]] for a, b in pairs])
 
 
+def _rig_from_above(top, cameras: list, box: ProbeBox, heldout: set) -> None:
+    """:func:`rig_figure`'s left panel on axes ``top``: the cameras, their names, angles and lines of sight, the
+    box's footprint and the arrow of the order's sense of rotation."""
+    pos = np.stack([np.asarray(c.position, dtype=np.float64) for c in cameras])
+    h = np.asarray(box.half_mm, dtype=np.float64)
+    top.add_patch(plt.Rectangle((-h[0], -h[2]), 2 * h[0], 2 * h[2], fill=False, color="k", lw=1.2))
+    for v, (c, p) in enumerate(zip(cameras, pos)):
+        held = v in heldout
+        colour = "tab:orange" if held else "tab:blue"
+        top.plot([p[0], 0], [p[2], 0], color=colour, lw=0.5, alpha=0.5)
+        top.plot(p[0], p[2], "o", color=colour)
+        angle = "" if "deg" in c.name else f"\n{np.degrees(np.arctan2(p[0], p[2])):.1f} deg"
+        top.annotate(f"{c.name}{angle}" + ("\nheld out" if held else ""), (p[0], p[2]), fontsize=7,
+                     textcoords="offset points", xytext=(6, 4), color=colour)
+    if len(cameras) > 1:
+        a, b = 0.55 * pos[0], 0.55 * pos[1]
+        turn = np.sign(pos[0][2] * pos[1][0] - pos[0][0] * pos[1][2])  # from z towards x: + counter-clockwise from above
+        top.annotate("", xy=(b[0], b[2]), xytext=(a[0], a[2]),
+                     arrowprops={"arrowstyle": "->", "connectionstyle": f"arc3,rad={0.3 * turn}", "color": "k"})
+        sense = "counter-clockwise" if turn > 0 else "clockwise"
+        top.set_title(f"seen from above: the views in their order turn {sense}", fontsize=9)
+    top.set_xlabel("x [mm]")
+    top.set_ylabel("z [mm] (down the page: seen from above)")
+    top.set_aspect("equal")
+    top.invert_yaxis()
+
+
 def rig_figure(cameras: list, box: ProbeBox, heldout: set, pictures: list, title: str = ""):
     """The rig seen from above beside each view's picture with the box drawn where the rig puts it.
 
@@ -397,28 +424,8 @@ def rig_figure(cameras: list, box: ProbeBox, heldout: set, pictures: list, title
         top = fig.add_subplot(grid[:, :2])
     else:  # no pictures (deflections given): the view from above alone
         fig, top = plt.subplots(figsize=(7.5, 7.5), layout="constrained")
-    pos = np.stack([np.asarray(c.position, dtype=np.float64) for c in cameras])
+    _rig_from_above(top, cameras, box, heldout)
     h = np.asarray(box.half_mm, dtype=np.float64)
-    top.add_patch(plt.Rectangle((-h[0], -h[2]), 2 * h[0], 2 * h[2], fill=False, color="k", lw=1.2))
-    for v, (c, p) in enumerate(zip(cameras, pos)):
-        held = v in heldout
-        colour = "tab:orange" if held else "tab:blue"
-        top.plot([p[0], 0], [p[2], 0], color=colour, lw=0.5, alpha=0.5)
-        top.plot(p[0], p[2], "o", color=colour)
-        angle = "" if "deg" in c.name else f"\n{np.degrees(np.arctan2(p[0], p[2])):.1f} deg"
-        top.annotate(f"{c.name}{angle}" + ("\nheld out" if held else ""), (p[0], p[2]), fontsize=7,
-                     textcoords="offset points", xytext=(6, 4), color=colour)
-    if len(cameras) > 1:
-        a, b = 0.55 * pos[0], 0.55 * pos[1]
-        turn = np.sign(pos[0][2] * pos[1][0] - pos[0][0] * pos[1][2])  # from z towards x: + counter-clockwise from above
-        top.annotate("", xy=(b[0], b[2]), xytext=(a[0], a[2]),
-                     arrowprops={"arrowstyle": "->", "connectionstyle": f"arc3,rad={0.3 * turn}", "color": "k"})
-        sense = "counter-clockwise" if turn > 0 else "clockwise"
-        top.set_title(f"seen from above: the views in their order turn {sense}", fontsize=9)
-    top.set_xlabel("x [mm]")
-    top.set_ylabel("z [mm] (down the page: seen from above)")
-    top.set_aspect("equal")
-    top.invert_yaxis()
     edges = _box_edges(box)
     for k, v in enumerate(shown):
         ax = fig.add_subplot(grid[k // cols, 2 + k % cols])

@@ -234,7 +234,7 @@ class IterativeSolver:
     def volumes(self) -> dict[str, np.ndarray]:
         """Every volume on the probe grid the solver has to show, each (nx, ny, nz) in the unit of sigma unless its
         name says otherwise: ``sigma`` (:meth:`reconstruction`) here, and what a solver adds (an uncertainty, a
-        count of views); :func:`nerif.io.outputs.write_outputs` writes them all, and the temperature of
+        count of views); :func:`nerif.results.final_volumes` takes them all, and the temperature of
         ``sigma``."""
         return {"sigma": self.reconstruction(), **self.added}
 
