@@ -16,7 +16,11 @@ subprocess with that checkout's code (``same_figures.run``); ``--resume`` reads 
 finished. ``--tv``: CGLS with total variation (the variants' checkout) at each weight of :data:`TV_WEIGHTS`, the one whose
 held-out deflections are best (:func:`nerif.metrics.select_by_heldout`: no truth) reported beside nerif. Prints one
 table (sigma relative error per capture, the mean over the seeds; the ratios' geometric mean and worst; nerif over
-TV) and writes ``independent.json`` and ``independent.md`` under ``--out``.
+TV), the peak's error and whether its interval holds the truth, and where each run's time went (set-up, training,
+the uncertainty's members, the rest: the results written; beside CGLS-TV's one solve and its sweep over the weights,
+and the sigma error along each run's wall time in ``independent.json``, ``curve``), and writes ``independent.json``
+and ``independent.md`` under ``--out``. Times are the runs' own (``metrics.json``): compare rows run in one call on a
+machine left alone.
 """
 from __future__ import annotations
 
@@ -40,7 +44,8 @@ REAL = ("real_lifted_jet", "real_bunsen_blowtorch")
 CAPTURES = ("bunsen", "bunsen_dirty", "bunsen_multicam", "lifted", "lifted_fine", *FAMILY, *REAL)
 KEYS = ("sigma_relative_error", "temperature_rmse_K", "heldout_explained", "heldout_deflection_rmse", "data_term",
         "data_term_kept", "flow_stage", "images_stage", "wall_time_s", "total_time_s", "T_peak_K", "T_peak_field_K",
-        "T_peak_true_K", "T_peak_interval_K", "T_peak_in_interval", "resolution_mm", "T_peak_resolved")
+        "T_peak_true_K", "T_peak_interval_K", "T_peak_in_interval", "resolution_mm", "T_peak_resolved",
+        "setup_time_s", "uncertainty_time_s")
 TV_WEIGHTS = (1e-3, 1e-2, 1e-1, 3e-1)
 CGLS_TV = ["solver=cgls", "solver.regularizer=tv"]
 
@@ -80,7 +85,9 @@ def one(tree: Path, overrides: list[str], folder: Path, resume: bool) -> dict:
     r = run(tree, overrides, folder)
     metrics = folder / "metrics.json"
     m = json.loads(metrics.read_text()) if metrics.is_file() and not r["exit"] else {}
-    row = {**{k: m.get(k) for k in KEYS}, "exit": r["exit"], "wall_s": time.perf_counter() - t, "message": r["message"]}
+    row = {**{k: m.get(k) for k in KEYS}, "exit": r["exit"], "wall_s": time.perf_counter() - t, "message": r["message"],
+           "curve": [[h["wall_time_s"], h.get("sigma_relative_error")] for h in m.get("history", [])
+                     if "wall_time_s" in h]}
     if not r["exit"]:  # a failed run is tried again by the next --resume
         record.write_text(json.dumps(row))
     return row
@@ -165,7 +172,44 @@ def report(table: dict, rows: list[str], captures: list[str], sums: dict) -> str
     lines.append("")
     lines.append("Each cell: sigma relative error against the truth, the mean over the seeds, +- half the spread "
                  "between them; (!) where it loses to the first row by more than the spread.")
-    return "\n".join(lines) + "\n\n" + peak_report(table, rows, captures)
+    return "\n".join(lines) + "\n\n" + peak_report(table, rows, captures) + "\n" + time_report(table, rows, captures)
+
+
+def parts_s(run: dict) -> dict | None:
+    """Where a finished run's time went [s]: ``start`` (the interpreter, imports and the config, before the run's own
+    clock), ``setup`` (to its first step: data, measurement or its cache, masks, the solver), ``training``,
+    ``members`` (the uncertainty's), ``rest`` (the evaluations after training, the results written), and
+    ``command`` (command to prompt); None where the run did not record them."""
+    if not run or run.get("total_time_s") is None or run.get("wall_time_s") is None or run.get("wall_s") is None:
+        return None
+    setup, members = run.get("setup_time_s") or 0.0, run.get("uncertainty_time_s") or 0.0
+    return {"start": run["wall_s"] - run["total_time_s"], "setup": setup, "training": run["wall_time_s"],
+            "members": members, "rest": run["total_time_s"] - setup - run["wall_time_s"] - members,
+            "command": run["wall_s"]}
+
+
+def time_report(table: dict, rows: list[str], captures: list[str]) -> str:
+    """Where each row's time went on each capture (its first seed's run), and its command-to-prompt time over CGLS-TV's
+    sweep over :data:`TV_WEIGHTS` (``--tv``: one solve at each weight, each a command)."""
+    tv = table.get("tv") or {}
+    lines = ["Time, command to prompt [s] (start-up, set-up, training, members, the rest, as parts_s in benchmarks/independent.py reads them; the sweep: "
+             f"CGLS-TV at each of {len(TV_WEIGHTS)} weights, each a command):", "",
+             "| capture | checkout or variant | start-up | set-up | training | members | the rest | command | TV: one "
+             "solve (picked) | TV: the sweep | command / sweep |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for c in captures:
+        runs = (tv.get(c) or {}).get("runs", {})
+        solves = [r.get("wall_s") for r in runs.values() if r and not r.get("exit") and r.get("wall_s")]
+        sweep = sum(solves) if runs and len(solves) == len(runs) else None
+        solve = ((tv.get(c) or {}).get("pick") or {}).get("wall_s")
+        for name in rows:
+            p = parts_s((table[c][name] or [{}])[0] or {})
+            if p is None:
+                continue
+            cells = [f"{p[k]:.1f}" for k in ("start", "setup", "training", "members", "rest", "command")]
+            cells += ["-" if v is None else f"{v:.1f}" for v in (solve, sweep)]
+            cells.append(f"{p['command'] / sweep:.2f}" if sweep else "-")
+            lines.append(f"| {c} | {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def peak_error(run: dict, key: str = "T_peak_K") -> float | None:
