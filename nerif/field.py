@@ -74,6 +74,15 @@ class NeuralField(nn.Module):
         keep = (g > 0).nonzero()[:, 0]
         return p.new_zeros(len(p)).index_put((keep,), self.network(p[keep]) * g[keep])
 
+    def load_checked(self, state: dict) -> None:
+        """``load_state_dict``; a state of another field configuration (encoder or field settings) said in one
+        sentence."""
+        try:
+            self.load_state_dict(state)
+        except RuntimeError as e:
+            raise ValueError("the checkpoint was made with another field configuration (encoder/field settings "
+                             f"differ): {str(e).splitlines()[0]}") from None
+
     @torch.no_grad()
     def on_grid(self, box: ProbeBox, chunk: int = 1 << 18) -> torch.Tensor:
         """sigma at the voxel centres of ``box``, (nx, ny, nz)."""

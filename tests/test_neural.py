@@ -392,20 +392,20 @@ def test_outputs_use_the_moving_average_of_the_trained_weights():
     np.testing.assert_array_equal(last.reconstruction(), last.field.on_grid(last.scene.box).double().numpy())
 
 
-def test_an_ensembles_members_are_new_solvers_from_the_trained_state_each_independent_of_the_others():
-    """Issue 57: a member is a new solver made from the trained one, which it leaves as it was; a member's field
-    depends on its own views, seed and rate alone, not on members trained before it (each started from the field
-    the member before it left, when members were the running solver changed in place)."""
+def test_clones_are_new_solvers_from_the_trained_state_each_independent_of_the_others():
+    """Issue 57: a clone (an ensemble's member) is a new solver made from the trained one, which it leaves as it was;
+    a clone's field depends on its own views, seed and rate alone, not on clones trained before it (each started
+    from the field the member before it left, when members were the running solver changed in place)."""
     s = neural_solver("train.iterations=8")
     for _ in range(8):
         s.step()
     before = {k: v.clone() for k, v in s.estimate.state_dict().items()}
-    first = s.member([0, 1, 2], 4, seed=3, lr_factor=0.3, perturb=0.5)
+    first = s.clone([0, 1, 2], 3, iterations=4, lr_factor=0.3, perturb=0.5)
     assert first is not s and first.iteration == 8 and first.iterations == 12
     assert first.train() and first.iteration == 12 and s.iteration == 8
-    other = s.member([1, 2, 3], 4, seed=4, lr_factor=0.3, perturb=0.5)
+    other = s.clone([1, 2, 3], 4, iterations=4, lr_factor=0.3, perturb=0.5)
     assert other.train()
-    again = s.member([0, 1, 2], 4, seed=3, lr_factor=0.3, perturb=0.5)
+    again = s.clone([0, 1, 2], 3, iterations=4, lr_factor=0.3, perturb=0.5)
     assert again.train()
     np.testing.assert_array_equal(again.reconstruction(), first.reconstruction())
     assert not np.array_equal(other.reconstruction(), first.reconstruction())

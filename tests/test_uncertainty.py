@@ -176,7 +176,8 @@ def test_a_solver_without_members_is_refused_before_training(tmp_path):
     from nerif.app import run
     from tests.helpers import tiny_config
 
-    with pytest.raises(ValueError, match="uncertainty=ensemble needs a solver that trains members; solver=cgls"):
+    with pytest.raises(ValueError, match="uncertainty=ensemble needs a trained field to start its members from: "
+                                         "solver=cgls has no trained field"):
         run(tiny_config("solver=cgls", "uncertainty=ensemble"), tmp_path)
 
 
@@ -204,9 +205,9 @@ def test_the_default_estimates_an_ensemble_only_where_the_run_can_calibrate_one(
     assert "the data hold no view out" in caplog.text and "no uncertainty estimated" in caplog.text
     s.scene = scene
     assert "cannot spare 9" in UNCERTAINTY.build({"name": "auto", "leave_out": 9}).without(s)
-    voxel = SimpleNamespace(trains_members=False, name="cgls", scene=scene)
+    voxel = SimpleNamespace(name="cgls", scene=scene)  # no trained field (nerif.solvers.trained)
     auto.check(voxel)  # no refusal
-    assert auto.without(voxel) == "solver=cgls trains no members"
+    assert auto.without(voxel) == "solver=cgls has no trained field"
 
 
 def test_the_default_takes_the_ensembles_settings_from_its_file():

@@ -161,6 +161,15 @@ def _record_exposures(measured, cached, cache_dir, distorted, references, noise,
                  ", ".join("-" if n is None else f"{100 * n:.2f} %" for n in noise))
 
 
+def held_out(heldout: Optional[list], rig, cameras: list) -> list[int]:
+    """The views never trained on: ``data.heldout`` where set, else the rig file's ``heldout``, else the view whose
+    absence leaves the fewest directions unseen (:func:`nerif.data.diagnostics.least_unseen_view`)."""
+    if heldout is not None:
+        return heldout_views(heldout, len(cameras), "data.heldout")
+    listed = [least_unseen_view(cameras)] if rig.heldout is None else list(rig.heldout)
+    return heldout_views(listed, len(cameras), f"{rig.path}: heldout")
+
+
 @DATASETS.register("capture", allocations=allocations)
 def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto", heldout: Optional[list] = None,
             frames=None, frame: Optional[int] = None, truth: Optional[str] = None, cache_dir=None,
@@ -196,13 +205,10 @@ def capture(root: str, flow: dict, measure: Optional[dict] = None, binning="auto
     full, cameras, roi, rays = rig_geometry(rig, binning, device)
     quiet = outside_the_box(cameras, rays[2], rays[3])
     box_fills_frame(cameras, quiet, roi, rig.box, str(rig.path))  # a scale off by a factor, before any image is read
-    held = (heldout_views(heldout, len(cameras), "data.heldout") if heldout is not None else
-            heldout_views([least_unseen_view(cameras)] if rig.heldout is None else list(rig.heldout), len(cameras),
-                          f"{rig.path}: heldout"))
+    held = held_out(heldout, rig, cameras)
     prior = sigma_prior(rig, rig.ambient)
     truth_T = read_truth(truth, rig.box) if truth is not None else None
-    lossy = lossy_images(files)
-    if lossy:
+    if lossy := lossy_images(files):
         log.warning("%s", lossy)
     (images, noise), (refs, ref_noise) = read_exposures(distorted, rig.sensor_px), reference_images(references,
                                                                                                     rig.sensor_px)

@@ -84,6 +84,21 @@ def allocations(cfg) -> list[tuple[str, str, float]]:
             probe_grid(voxels, "phantom.shape")]
 
 
+def _observed(fine, sensing: dict, cameras: list, rays: tuple, step_mm: Optional[float], cache_dir,
+              device: str) -> dict:
+    """What the ``sensing`` config (a :data:`SENSING` entry and its parameters) observes of the phantom ``fine``
+    (its rendering grid) through ``cameras`` along ``rays`` (dirs, pixel, view_start), as the cache keeps it:
+    ``eps`` (deflections) or ``measured/...`` (a measurement's views), and the record's ``sensing/...``."""
+    dirs, pixel, view_start = rays
+    delta = torch.as_tensor(fine.delta, dtype=torch.float32, device=device)
+    observed, record = SENSING.build(sensing, delta=delta, box=fine.box, cameras=cameras, dirs=dirs, pixel=pixel,
+                                     view_start=view_start, step_mm=step_mm, rig_binning=cameras[0].binning,
+                                     cache_dir=cache_dir)
+    seen = ({f"measured/{k}": v for k, v in observed.arrays().items()} if isinstance(observed, MeasuredViews)
+            else {"eps": observed.cpu().numpy()})
+    return {**seen, **{f"sensing/{k}": v for k, v in (record.arrays() if record else {}).items()}}
+
+
 @DATASETS.register("synthetic", hints={"binning": "rig.binning"}, allocations=allocations)
 def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", sensor: Optional[dict] = None,
               render_supersample: int = 4, render_step_mm: Optional[float] = None, cache_dir: Optional[str] = None,
@@ -122,13 +137,8 @@ def synthetic(phantom: dict, rig: dict, T_max: float, sensing: str = "ideal", se
 
     def observe() -> dict:
         fine = supersampled(phantom, render_supersample) if render_supersample > 1 else ph
-        delta = torch.as_tensor(fine.delta, dtype=torch.float32, device=device)
-        observed, record = SENSING.build({"name": sensing, **sensor}, delta=delta, box=fine.box, cameras=cameras,
-                                         dirs=dirs, pixel=pixel, view_start=view_start, step_mm=render_step_mm,
-                                         rig_binning=cameras[0].binning, cache_dir=cache_dir)
-        seen = ({f"measured/{k}": v for k, v in observed.arrays().items()} if isinstance(observed, MeasuredViews)
-                else {"eps": observed.cpu().numpy()})
-        return {**seen, **{f"sensing/{k}": v for k, v in (record.arrays() if record else {}).items()}}
+        return _observed(fine, {"name": sensing, **sensor}, cameras, (dirs, pixel, view_start), render_step_mm,
+                         cache_dir, device)
 
     payload = {"v": _SCENE_CACHE_VERSION, "truth": content_digest(ph.T), "phantom": phantom, "rig": rig, "step": render_step_mm,
                "supersample": render_supersample, "sensing": sensing, "sensor": sensor}

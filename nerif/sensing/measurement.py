@@ -147,12 +147,10 @@ def measure_view(distorted: np.ndarray, reference: np.ndarray, flow: dict, grid_
         shake: estimate the view's rigid shift between the exposures and take it off (:mod:`~nerif.sensing.shake`).
         median_threshold, median_eps_px: the normalised median test's threshold and noise floor [px of the full
             sensor] (:mod:`~nerif.sensing.vectors`); threshold None: no test.
-        flow_factor: the flow and the texture's detectors (occlusion, the exposures compared) read the images made
-            this many times smaller (:func:`shrunk`; saturation and the noise read them as they are); ``auto``: as
-            the texture's scale says (:func:`shrink_factor`).
+        flow_factor: the flow, occlusion and the exposures compared read the images this many times smaller
+            (:func:`shrunk`; not saturation, nor the noise); ``auto``: as the texture says (:func:`shrink_factor`).
     """
-    h, w = grid_px
-    H, W = reference.shape
+    (h, w), (H, W) = grid_px, reference.shape
     kept = _Kept(region, h, w)
     f, small, width, contrast = _texture(reference, flow_factor)
     found = images_compared(shrunk(distorted, f), small, width, contrast)

@@ -297,19 +297,9 @@ class IterativeSolver:
                                  "same data, or start afresh without train.resume")
         self.load_state_dict(st)
 
-    trains_members = False  # whether :meth:`member` is implemented
-
-    def member(self, views: list[int], iterations: int, seed: int, lr_factor: float,
-               perturb: float = 0.0) -> "IterativeSolver":
-        """A member of an ensemble (:mod:`nerif.solvers.uncertainty`), a new solver made from this one's result
-        (left as it is): perturbed by ``perturb`` (a share of its own size), to be trained (``train(stop) -> bool``)
-        for ``iterations`` more steps on the training ``views`` only, its own random draws from ``seed``, from
-        ``lr_factor`` of its peak learning rate. Solvers that can override it (and set :attr:`trains_members`)."""
-        raise NotImplementedError
-
     def train(self, stop: Optional[Callable[[], bool]] = None) -> bool:
-        """Steps to :attr:`iterations` without evaluations or checkpoints (an ensemble's member); ``stop()`` true ends
-        it between steps. Returns whether it ran to the end."""
+        """Steps to :attr:`iterations` without evaluations or checkpoints (a clone of a trained field,
+        :mod:`nerif.solvers.trained`); ``stop()`` true ends it between steps. Returns whether it ran to the end."""
         while self.iteration < self.iterations:
             if stop is not None and stop():
                 return False

@@ -15,6 +15,7 @@ import time
 
 import torch
 
+from nerif.solvers.trained import why_not
 from nerif.solvers.uncertainty import UNCERTAINTY, calibrated_spread, heldout_fit
 from nerif.units import declare
 
@@ -54,18 +55,19 @@ class LaplaceApproximation:
 
     def check(self, solver) -> None:
         """One sentence before any training where the solver has no trained field to draw from."""
-        if not solver.trains_members:
-            raise ValueError(f"uncertainty=laplace needs a neural field to draw from; solver={solver.name} has none: "
-                             "use uncertainty=none, or solver=nerif")
+        why = why_not(solver, field=True)
+        if why:
+            raise ValueError(f"uncertainty=laplace needs a trained field to draw from: {why}; use uncertainty=none, "
+                             "or solver=nerif")
 
     def __call__(self, solver, stop=None) -> dict:
-        """The uncertainty of ``solver``'s trained result, which is left as it was (the draws are a member's:
-        :meth:`~nerif.solvers.neural.NeuralSolver.member`); ``stop()`` true (a signal) ends it and returns
+        """The uncertainty of ``solver``'s trained result (a :class:`~nerif.solvers.trained.TrainedField`), which is
+        left as it was (the draws are its clone's); ``stop()`` true (a signal) ends it and returns
         nothing."""
         t0 = time.perf_counter()
         scene = solver.scene
-        draw = solver.member(list(range(scene.n_views)), 1, self.seed, 1.0)  # the trained field; never trained on
-        params = [p for p in draw.field.parameters() if p.requires_grad]
+        draw = solver.clone(list(range(scene.n_views)), self.seed)  # the trained field; never trained on
+        params = draw.parameters()
         curvature = [torch.zeros_like(p) for p in params]
         for _ in range(self.batches):
             if stop is not None and stop():

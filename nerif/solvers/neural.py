@@ -20,7 +20,7 @@ from nerif.renderers import SAMPLERS, DeflectionRenderer
 from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_faces
 from nerif.solvers.batches import RayBatcher
 from nerif.solvers.data_terms import DATA_TERMS
-from nerif.solvers.poses import POSES
+from nerif.solvers.poses import POSES, log_refined
 from nerif.solvers.stages import HeldoutChoice, Stage, StagePlan
 from nerif.solvers.training import Optimisation, SampleCounts, Training, allocations, warm_start
 
@@ -49,7 +49,6 @@ class NeuralSolver(IterativeSolver):
     name = "nerif"
     allocations = staticmethod(allocations)
     starts_from_previous = True
-    trains_members = True
 
     def __init__(self, *, encoder: Mapping, field: Mapping, grad: Mapping, sampler: Mapping, loss: Mapping,
                  train: Mapping, metrics: Mapping, seed: int, label: str, data_term: Optional[Mapping] = None,
@@ -118,23 +117,16 @@ class NeuralSolver(IterativeSolver):
         return self
 
     def choose_by_heldout(self) -> Optional[str]:
-        """At the end of a run whose last stage chooses: keeps the field the held-out views prefer
-        (:class:`HeldoutChoice`), putting back the one the stage before it left where that one explains them better;
-        records the choice in :attr:`report` and returns the name of the stage whose field it kept (None where
-        nothing was chosen or the run has not finished)."""
+        """At the end of a run whose last stage chooses: the field the held-out views prefer kept
+        (:meth:`HeldoutChoice.settle`), the choice in :attr:`report`; the name of the stage whose field it kept (None
+        where nothing was chosen or the run has not finished)."""
         if self.iteration < self.iterations or "data_term_kept" in self.report:
             return None
-        kept, report = self.choice.choose()
-        self.report.update(report)
-        if kept is not None and kept != self.plan.chooser.name:
-            self.estimate.load_state_dict(self.choice.previous["weights"])
-            self.field.load_state_dict(self.choice.previous["weights"])
-        return kept
+        return self.choice.settle(self.report, (self.estimate, self.field))
 
     def fit(self, **kwargs) -> dict:
-        """:meth:`IterativeSolver.fit`, then the held-out views' choice between the last two stages' fields
-        (:meth:`choose_by_heldout`); where they keep the earlier one, the last evaluation and the checkpoint are of
-        it."""
+        """:meth:`IterativeSolver.fit`, then the held-out views' choice (:meth:`choose_by_heldout`): where they keep
+        the earlier stage's field, the last evaluation and the checkpoint are of it; the refined poses reported."""
         last = super().fit(**kwargs)
         chooser = self.plan.chooser
         if chooser is not None and self.choose_by_heldout() not in (None, chooser.name):
@@ -142,32 +134,17 @@ class NeuralSolver(IterativeSolver):
             last = self.evaluate()
             if kwargs.get("checkpoint") is not None and kwargs.get("checkpoint_at_end", True):
                 self.checkpoint(kwargs["checkpoint"])
-        self.report_poses()
+        found = self.poses.report()  # the refined poses, where they are
+        self.report.update(found)
+        log_refined(found)
         return last
 
-    def report_poses(self) -> None:
-        """The refined poses (:meth:`RefinedPoses.report`) into :attr:`report` and the log, the warning of one at its
-        bound too; nothing where the poses are the rig's."""
-        found = self.poses.report()
-        if not found:
-            return
-        self.report.update(found)
-        log.info("refined poses: turns about the vertical axis %s deg; largest rotation %.2f deg, translation %.2f mm",
-                 ", ".join(f"{a:+.2f}" for a in found["pose_angle_deg"]), found["pose_rotation_max_deg"],
-                 found["pose_translation_max_mm"])
-        if "pose_warning" in found:
-            log.warning(found["pose_warning"])
-
-    def member(self, views: list[int], iterations: int, seed: int, lr_factor: float,
-               perturb: float = 0.0) -> "NeuralSolver":
-        """An ensemble's member, a new solver made from this one's trained state (which it leaves as it is): the
-        field evaluations use (the kept one), its encoder's tables perturbed by Gaussian noise of ``perturb`` times
-        each table's RMS (what the data pin down is pulled back by the training, what they leave free stays
-        perturbed), to be trained (:meth:`train`) for ``iterations`` more steps on the observed deflections (the
-        flow's term, noise-weighted as set) of the training ``views`` only, with its own optimiser, cosine schedule
-        from ``lr_factor`` of each group's peak rate, average and random draws (``seed``). The scene, masks and
-        evaluation are shared, read only: members can train side by side (:func:`nerif.field.perturb_tables`,
-        :meth:`DeflectionTerm.for_member`)."""
+    def clone(self, views: list[int], seed: int, *, iterations: int = 0, lr_factor: float = 1.0,
+              perturb: float = 0.0) -> "NeuralSolver":
+        """:meth:`nerif.solvers.trained.TrainedField.clone` of the field evaluations use (the kept one): its
+        encoder's tables perturbed by ``perturb`` times each table's RMS (:func:`nerif.field.perturb_tables`), trained
+        on the flow's term of ``views`` (:meth:`DeflectionTerm.for_member`) with its own optimiser, schedule, average
+        and draws. The scene, masks and evaluation are shared, read only: clones can train side by side."""
         m = copy.copy(self)
         m.field = copy.deepcopy(self.field)
         m.field.load_state_dict({k: v.detach().clone() for k, v in self.estimate.state_dict().items()})
@@ -175,14 +152,18 @@ class NeuralSolver(IterativeSolver):
         m.generator = torch.Generator(self.device).manual_seed(int(seed))
         if perturb > 0:
             perturb_tables(m.field, perturb, m.generator)
-        m.data_term = self.data_term.for_member().setup(self.scene, self.batches.of_views(views, m.generator),
-                                                        iterations)
-        m.plan = StagePlan([Stage("flow", m.data_term, iterations, lr=lr_factor)], start=self.iteration)
+        steps = max(int(iterations), 1)  # a plan of at least one step; a clone never trained keeps its state
+        m.data_term = self.data_term.for_member().setup(self.scene, self.batches.of_views(views, m.generator), steps)
+        m.plan = StagePlan([Stage("flow", m.data_term, steps, lr=lr_factor)], start=self.iteration)
         m.iterations, m.choice = m.plan.iterations, HeldoutChoice(m.plan, None, False)
         m.optimisation = Optimisation(m.field, m.data_term.parameter_groups(), self.training, m.plan, m.iteration)
         m.history, m.step_times, m.report, m.labels = [], [], {}, dict(self.labels)
         m.counts = copy.copy(self.counts)
         return m
+
+    def parameters(self) -> list[torch.Tensor]:
+        """The field's trained tensors (:meth:`nerif.solvers.trained.TrainedField.parameters`)."""
+        return [p for p in self.field.parameters() if p.requires_grad]
 
     def saturation(self, sigma: np.ndarray, failed: str = "") -> dict:
         """:func:`nerif.field.prior_saturation` of ``sigma`` within this field's prior (``failed``: the held-out
@@ -191,12 +172,12 @@ class NeuralSolver(IterativeSolver):
 
     # --- optimisation ---
     def batch_loss(self, update_occupancy: bool = True) -> tuple[dict, object]:
-        """The loss of the next batch of the stage that holds :attr:`iteration` (its rays drawn from
-        :attr:`generator`, the occupancy grid updated first where it is due and ``update_occupancy``), with its graph
-        to the field's parameters: ``loss`` (the weighted sum), ``loss_<term>`` of the data term, ``loss_boundary``,
+        """The next batch's loss (the stage that holds :attr:`iteration`; the occupancy grid updated first where due
+        and ``update_occupancy``) with its graph to the field: ``loss``, ``loss_<term>``, ``loss_boundary``,
         ``loss_tv``; and the samples."""
         if update_occupancy:
-            self.sampler.update(self.scene.box, self.occupancy_value, self.iteration, self.generator)
+            # the occupancy grid thresholds |sigma| of the trained field
+            self.sampler.update(self.scene.box, lambda x: self.field(x).abs(), self.iteration, self.generator)
         stage = self.plan.at(self.iteration)
         batch = stage.term.draw(self.iteration)
         origins, dirs, turn = self.poses.rays(batch.origins, batch.dirs)
@@ -240,10 +221,6 @@ class NeuralSolver(IterativeSolver):
     def shakes_px(self) -> Optional[torch.Tensor]:
         """The shakes the image term refined with the field (``data_term.shake_lr``), else None."""
         return self.data_term.shakes_px()
-
-    def occupancy_value(self, positions: torch.Tensor) -> torch.Tensor:
-        """(N, 3) [mm] -> (N,) |sigma| of the trained field: what the occupancy grid thresholds."""
-        return self.field(positions).abs()
 
     # --- evaluation ---
     @property
@@ -291,11 +268,7 @@ class NeuralSolver(IterativeSolver):
                 "previous_stage": self.choice.previous}
 
     def _load_field(self, st: dict, weights: Optional[dict] = None) -> None:
-        try:
-            self.field.load_state_dict(st["field"] if weights is None else weights)
-        except RuntimeError as e:
-            raise ValueError("the checkpoint was made with another field configuration (encoder/field settings "
-                             f"differ): {str(e).splitlines()[0]}") from None
+        self.field.load_checked(st["field"] if weights is None else weights)
         try:
             self.sampler.load_state_dict(st.get("sampler", {}))
         except RuntimeError as e:
@@ -303,9 +276,8 @@ class NeuralSolver(IterativeSolver):
                              f"field.occupancy_resolution differ): {str(e).splitlines()[0]}") from None
 
     def start_from(self, path: Path) -> None:
-        """The previous frame's result (its averaged weights, or its trained ones when it kept no average) and
-        occupancy grid, from ``path`` (that frame's checkpoint); the optimiser, its schedule, the average and the
-        counters start afresh. The 3-D mask stays this frame's own."""
+        """The previous frame's result (its averaged weights, else its trained ones) and occupancy grid from its
+        checkpoint ``path``; the optimiser, schedule, average and counters afresh, the 3-D mask this frame's own."""
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"the previous frame's checkpoint {path} does not exist")

@@ -294,3 +294,15 @@ class RefinedPoses(GivenPoses):
             self.omega, self.t, self.fits = st["omega"].to(self.omega), st["t"].to(self.t), int(st["fits"])
             self.free = st.get("free", self.omega.abs().sum(-1) > 0).cpu().clone()
             self.moved = bool(self.omega.any() or self.t.any())
+
+
+def log_refined(found: dict) -> None:
+    """The refined poses (``found``: :meth:`RefinedPoses.report`) in the log, the warning of one at its bound too;
+    nothing where the poses are the rig's (``found`` empty)."""
+    if not found:
+        return
+    log.info("refined poses: turns about the vertical axis %s deg; largest rotation %.2f deg, translation %.2f mm",
+             ", ".join(f"{a:+.2f}" for a in found["pose_angle_deg"]), found["pose_rotation_max_deg"],
+             found["pose_translation_max_mm"])
+    if "pose_warning" in found:
+        log.warning(found["pose_warning"])

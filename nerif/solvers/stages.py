@@ -176,6 +176,17 @@ class HeldoutChoice:
             return None, {}
         return choose(before, last, self.previous["figures"], self.figures(), self.physical)
 
+    def settle(self, report: dict, fields: tuple) -> Optional[str]:
+        """At the end of the run: :meth:`choose`, its record added to ``report``; where the held-out views keep the
+        stage before the chooser, its weights put back into each of ``fields`` (modules). The kept stage's name, or
+        None where nothing was chosen."""
+        kept, found = self.choose()
+        report.update(found)
+        if kept is not None and kept != self.plan.chooser.name:
+            for field in fields:
+                field.load_state_dict(self.previous["weights"])
+        return kept
+
 
 def choose(before: Stage, last: Stage, old: dict, new: dict, physical: bool) -> tuple[str, dict]:
     """The name of the stage whose field the held-out views keep, and what :attr:`report` records of the choice:

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import logging
 import time
+
 import numpy as np
 import torch
 
 from nerif.masks.backprojection import views_seeing
 from nerif.registry import Registry
+from nerif.solvers.trained import why_not
 from nerif.units import SIGMA, declare
 
 log = logging.getLogger(__name__)
@@ -89,17 +91,17 @@ class ViewEnsemble:
     def check(self, solver) -> None:
         """One sentence before any training where the solver cannot train members or the training views cannot
         spare ``leave_out``."""
-        if not solver.trains_members:
-            raise ValueError(f"uncertainty=ensemble needs a solver that trains members; solver={solver.name} does "
-                             "not: use uncertainty=none, or solver=nerif")
-        n_views = solver.scene.n_views
-        if self.leave_out > n_views - 2:
-            raise ValueError(f"uncertainty.leave_out={self.leave_out}: each member must keep at least 2 of the "
-                             f"{n_views} training views; leave out fewer")
+        why = why_not(solver, field=True)
+        if why:
+            raise ValueError(f"uncertainty=ensemble needs a trained field to start its members from: {why}; use "
+                             "uncertainty=none, or solver=nerif")
+        why = why_not(solver, leave_out=self.leave_out)
+        if why:
+            raise ValueError(f"uncertainty.leave_out={self.leave_out}: {why}; leave out fewer")
 
     def __call__(self, solver, stop=None) -> dict:
-        """The uncertainty of ``solver``'s trained result (the solver is left as it was: each member is a new solver,
-        :meth:`~nerif.solvers.neural.NeuralSolver.member`); ``stop()`` true (a signal) ends it between steps and
+        """The uncertainty of ``solver``'s trained result (a :class:`~nerif.solvers.trained.TrainedField`, left as it
+        was: each member is its clone); ``stop()`` true (a signal) ends it between steps and
         returns nothing."""
         scene = solver.scene
         t0 = time.perf_counter()
@@ -108,8 +110,8 @@ class ViewEnsemble:
         left = left_out_views(scene.n_views, self.members, self.leave_out)
         fields, held_pred = [], []
         for k, out in enumerate(left):
-            member = solver.member([v for v in range(scene.n_views) if v not in out], iterations, self.seed + k,
-                                   self.lr_factor, self.perturb)
+            member = solver.clone([v for v in range(scene.n_views) if v not in out], self.seed + k,
+                                  iterations=iterations, lr_factor=self.lr_factor, perturb=self.perturb)
             if not member.train(stop):
                 return {}
             fields.append(member.reconstruction())
@@ -130,14 +132,8 @@ class AutomaticUncertainty(ViewEnsemble):
     at 1.1-1.3x a run's time (issue 59: benchmarks/RESULTS.md)."""
 
     def without(self, solver) -> str:
-        """Why this run cannot calibrate an ensemble, in words; empty where it can."""
-        if not solver.trains_members:
-            return f"solver={solver.name} trains no members"
-        if solver.scene.heldout is None or len(solver.scene.heldout.dirs) == 0:
-            return "the data hold no view out to calibrate the members' spread by (data.heldout)"
-        if self.leave_out > solver.scene.n_views - 2:
-            return f"{solver.scene.n_views} training views cannot spare {self.leave_out} a member"
-        return ""
+        """Why this run cannot calibrate an ensemble, in words; empty where it can (:func:`why_not`)."""
+        return why_not(solver, field=True, heldout=True, leave_out=self.leave_out)
 
     def check(self, solver) -> None:
         pass
