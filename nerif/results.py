@@ -144,7 +144,7 @@ def peak_and_uncertainty(solver, scene, vols: dict, flame_above_K: float, warnin
     one sentence, added to ``warnings``), the uncertainty's figures and the intervals of the peak, its position and
     the flame's volume."""
     amb, box, sigma = scene.ambient, scene.box, vols["sigma"]
-    lowest = solver.interval[0] if hasattr(solver, "interval") else float(sigma.min())
+    lowest = solver.interval[0] if solver.interval is not None else float(sigma.min())
     resolution = effective_resolution_mm(solver.cell_mm, scene.ray_spacing_mm)
     out: dict = {}
     if amb.temperature_known:

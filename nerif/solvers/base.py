@@ -150,6 +150,7 @@ class IterativeSolver:
 
     name = "solver"
     starts_from_previous = False  # whether :meth:`start_from` can begin a frame from the previous frame's state
+    interval: Optional[tuple] = None  # (a, b) the bounds of the result's sigma, where the solver has a prior
 
     def __init__(self, *, iterations: int, eval_every: int, metrics: Mapping, seed: int, label: str):
         if iterations < 1:

@@ -84,7 +84,7 @@ class LaplaceApproximation:
             widths.append(variance.sqrt() * (self.step * size / variance.mean().sqrt()))
         trained = [p.detach().clone() for p in params]
         fields, held_pred = [], []
-        held = scene.heldout is not None and len(scene.heldout.dirs) > 0
+        held = not why_not(solver, heldout=True)  # a view no field trained on, to calibrate by
         for _ in range(self.samples):
             if stop is not None and stop():
                 return {}

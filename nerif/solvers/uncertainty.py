@@ -106,7 +106,7 @@ class ViewEnsemble:
         scene = solver.scene
         t0 = time.perf_counter()
         iterations = max(1, int(round(self.fraction * solver.iteration)))  # of those run (a run may stop early)
-        held = scene.heldout is not None and len(scene.heldout.dirs) > 0
+        held = not why_not(solver, heldout=True)  # a view no field trained on, to calibrate by
         left = left_out_views(scene.n_views, self.members, self.leave_out)
         fields, held_pred = [], []
         for k, out in enumerate(left):
