@@ -11,36 +11,6 @@ BLOB = {"name": "gaussian_blob", "shape": [16, 16, 16], "voxel_mm": 2.0, "width_
 RIG = {"name": "arc", "n_cameras": 3, "binning": 40}
 
 
-def test_synthetic_scene_keeps_only_rays_through_the_box_and_caches(tmp_path):
-    scene = DATASETS.build({"name": "synthetic", "phantom": BLOB, "rig": RIG, "T_max": 2000.0,
-                            "render_supersample": 2, "cache_dir": str(tmp_path)})
-    assert scene.n_views == 3 and scene.view_start[-1] == len(scene.dirs) == len(scene.eps)
-    o = scene.origins[scene.ray_views()]
-    assert bool(scene.box.intersect(o, scene.dirs)[2].all())
-    assert len(list(tmp_path.glob("synthetic-*.npz"))) == 1
-    again = DATASETS.build({"name": "synthetic", "phantom": BLOB, "rig": RIG, "T_max": 2000.0,
-                            "render_supersample": 2, "cache_dir": str(tmp_path)})
-    torch.testing.assert_close(again.eps, scene.eps)
-    # the pixel index addresses the ray's own pixel
-    cam = scene.cameras[1]
-    sl = slice(int(scene.view_start[1]), int(scene.view_start[2]))
-    torch.testing.assert_close(scene.dirs[sl], cam.pixel_directions()[scene.pixel[sl]].float())
-
-
-def test_supersampling_needs_a_phantom_with_a_grid(tmp_path):
-    np.save(tmp_path / "T.npy", np.full((8, 8, 8), 400.0))
-    ph = {"name": "file", "path": str(tmp_path / "T.npy"), "voxel_mm": 2.0, "T0": 296.15, "n0": 1.00027}
-    with pytest.raises(ValueError, match="render_supersample=1"):
-        DATASETS.build({"name": "synthetic", "phantom": ph, "rig": RIG, "T_max": 2000.0, "render_supersample": 2})
-    scene = DATASETS.build({"name": "synthetic", "render_supersample": 1, "phantom": ph, "rig": RIG, "T_max": 2000.0})
-    assert scene.truth_T.shape == (8, 8, 8)
-
-
-def test_unknown_sensing_is_refused():
-    with pytest.raises(ValueError, match="magic.*ideal, perpendicular, realistic"):
-        DATASETS.build({"name": "synthetic", "render_supersample": 1, "phantom": BLOB, "rig": RIG, "T_max": 2000.0, "sensing": "magic"})
-
-
 REALISTIC = {"name": "synthetic", "render_supersample": 1, "phantom": BLOB, "rig": dict(RIG, n_cameras=2), "T_max": 2000.0, "sensing": "realistic",
              "sensor": {"aperture_rays": 8, "noise_variance": 1e-4, "image_binning": 8, "seed": 0,
                         "pattern": {"name": "poisson_disk"}, "flow": {"name": "farneback"}}}
@@ -87,22 +57,6 @@ def test_non_finite_estimates_are_masked_and_said(caplog):
         ok = finite_or_masked(u, "view 3")
     assert ok.sum() == 18 and not ok[1, 2] and not ok[3, 4]
     assert "view 3: 2 of 20 displacement estimates are left out" in caplog.text
-
-
-@pytest.mark.parametrize("sensing", ["ideal", "perpendicular"])
-def test_deflection_noise_has_the_asked_rms_and_is_perpendicular_when_only_that_is_measured(sensing):
-    base = {"name": "synthetic", "phantom": BLOB, "rig": RIG, "T_max": 2000.0, "render_supersample": 1,
-            "sensing": sensing}
-    clean = DATASETS.build(base)
-    noisy = DATASETS.build({**base, "deflection_noise": 0.2, "noise_seed": 3})
-    n = (noisy.eps - clean.eps).double()
-    rms = float(clean.eps.double().norm(dim=-1).pow(2).mean().sqrt())
-    assert float(n.norm(dim=-1).pow(2).mean().sqrt()) == pytest.approx(0.2 * rms, rel=1e-4)
-    along = (n * clean.dirs.double()).sum(-1).abs().max()
-    assert (along < 1e-6 * rms) if sensing == "perpendicular" else (along > 0.05 * rms)
-    torch.testing.assert_close(DATASETS.build({**base, "deflection_noise": 0.2, "noise_seed": 3}).eps, noisy.eps)
-    with pytest.raises(ValueError, match="data.deflection_noise=-0.1"):
-        DATASETS.build({**base, "deflection_noise": -0.1})
 
 
 def test_distinct_view_directions():
