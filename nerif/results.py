@@ -159,7 +159,7 @@ def peak_and_uncertainty(solver, scene, vols: dict, flame_above_K: float, warnin
         out.update(uncertainty_report(vols, scene))
         if amb.temperature_known:
             out.update(reported_intervals(sigma, vols["sigma_std"], amb.temperature_from_sigma, box.axes(),
-                                          flame_above_K, lowest, blur_vox=resolution / box.voxel_mm))
+                                          flame_above_K, lowest, blur_vox=resolution / box.voxel_mm, peak=peak))
             out.update(within_intervals(out))
     return out
 
