@@ -25,7 +25,7 @@ from nerif.sensing.measurement import CAUSES
 from nerif.solvers import SOLVERS, Interrupted
 from nerif.solvers.base import stop_signals
 from nerif.solvers.uncertainty import UNCERTAINTY
-from nerif.units import declare, metric_units
+from nerif.units import declare, metric_units, stage_key
 
 log = logging.getLogger(__name__)
 
@@ -203,7 +203,7 @@ def _write(solver, scene, out_dir: Path, board: Board, cfg: DictConfig, device: 
             if cfg.figures:
                 label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
                 write_figures(found, scene, out_dir, solver.history, board.losses,
-                              f"{label}, {solver.iteration} iterations", solver.report.get("images_from_iteration"),
+                              f"{label}, {solver.iteration} iterations", solver.report.get(stage_key("images", "from_iteration")),
                               show=board.show)
             metrics = found.metrics
         finally:

@@ -4,7 +4,7 @@ run catches a new key)."""
 import pytest
 
 import nerif.evaluation  # noqa: F401  (declares the evaluation's figures)
-import nerif.io.outputs  # noqa: F401  (declares the measurement's container)
+import nerif.results  # noqa: F401  (declares the measurement's container)
 import nerif.sensing.findings  # noqa: F401  (declares the measurement's findings)
 import nerif.solvers.base  # noqa: F401  (declares the loop's figures and labels)
 from nerif.units import DEFLECTION, declare, metric_units, unit_of

@@ -19,7 +19,7 @@ from nerif.export import atomic_write, to_uint8, write_npz, write_png, write_vti
 from nerif.metrics import temperature_std
 from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
                              profiles_figure, rig_figure, save_figure, sensing_figure, slice_figure)
-from nerif.units import VOLUMES
+from nerif.units import VOLUMES, stage_key
 
 # the files every run writes (held-out figures, masks and sensing pictures beside them where there are any)
 RESULTS = ("reconstruction.npz", "reconstruction.vti", "slices.png", "profiles.png", "curves.png", "metrics.json")
@@ -206,14 +206,15 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
                    f"{100 * m['heldout_photometric_rmse_none']:.2f} %)" if known("heldout_photometric_rmse_flow") else "")
             held.append(f"image residual {100 * m['heldout_photometric_rmse']:.2f} % of full range{ref}")
         parts.append("held out: " + "; ".join(held))
-    if m.get("flow_stage") and m.get("images_stage"):  # the held-out views chose between the flow's field and the images'
+    flow_field, images_field = m.get(stage_key("flow")), m.get(stage_key("images"))
+    if flow_field and images_field:  # the held-out views chose between the flow's field and the images'
         whose = "the images'" if m["data_term_kept"] == "images" else "the flow's"
-        if "heldout_image_misfit" in m["images_stage"] and "heldout_image_misfit" in m["flow_stage"]:
-            flow, images = (100 * m[k]["heldout_image_misfit"] for k in ("flow_stage", "images_stage"))
+        if "heldout_image_misfit" in images_field and "heldout_image_misfit" in flow_field:
+            flow, images = (100 * f["heldout_image_misfit"] for f in (flow_field, images_field))
             parts.append(f"kept {whose} field (held-out image residual: images {images:.3g}, flow {flow:.3g} % of "
                          "full range)")
         else:
-            flow, images = m["flow_stage"]["heldout_misfit"], m["images_stage"]["heldout_misfit"]
+            flow, images = flow_field["heldout_misfit"], images_field["heldout_misfit"]
             unit = "sigma" if "deflection_unit" in m else "px"
             parts.append(f"kept {whose} field (held out: images {images:.3g}, flow {flow:.3g} {unit})")
     elif m.get("data_term_kept"):  # a series: how often each was kept

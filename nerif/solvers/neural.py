@@ -21,7 +21,7 @@ from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_
 from nerif.solvers.batches import RayBatcher
 from nerif.solvers.data_terms import DATA_TERMS
 from nerif.solvers.poses import POSES, log_refined
-from nerif.solvers.stages import HeldoutChoice, Stage, StagePlan
+from nerif.solvers.stages import HeldoutChoice, Stage, StagePlan, stage_key
 from nerif.solvers.training import Optimisation, SampleCounts, Training, allocations, warm_start
 
 log = logging.getLogger(__name__)
@@ -100,7 +100,7 @@ class NeuralSolver(IterativeSolver):
             self.labels["data_term"] = self.data_term.fitted
         for stage, end in zip(self.plan.stages, self.plan.ends):
             if stage.name != "flow":
-                self.report[f"{stage.name}_from_iteration"] = end - stage.iterations
+                self.report[stage_key(stage.name, "from_iteration")] = end - stage.iterations
         rms = float(scene.eps[self.batches.inside()].double().norm(dim=-1).pow(2).mean().sqrt()) / scene.scale
         tv = TotalVariation(scene.box, lc["tv_weight"], lc["tv_points"], rms)
         self.tv = tv if tv.active else None
@@ -289,7 +289,7 @@ class NeuralSolver(IterativeSolver):
         self.data_term.load_state_dict(st.get("data_term", {}))
         self.poses.load_state_dict(st.get("poses", {}))
         self.optimisation.load_state_dict(st, int(st["iteration"]))
-        self.choice.previous = st.get("previous_stage", st.get("flow_stage"))
+        self.choice.previous = st.get("previous_stage", st.get(stage_key("flow")))
         self.generator.set_state(st["generator"].cpu() if self.device.type == "cpu" else st["generator"])
         super().load_state_dict(st)
         self.counts.load_state_dict(st)

@@ -16,14 +16,14 @@ from typing import Callable, Optional, Sequence
 
 import torch
 
-from nerif.units import declare
+from nerif.units import declare, stage_key
 
 log = logging.getLogger(__name__)
 
 declare(chosen_by="(what chose the field kept: held-out images or held-out displacements)",
-        images_from_iteration="iterations", text=("data_term_kept",),
-        containers={"flow_stage": "(the flow's field, each unit by its name here)",
-                    "images_stage": "(the images' field, each unit by its name here)"})
+        text=("data_term_kept",), **{stage_key("images", "from_iteration"): "iterations"},
+        containers={stage_key("flow"): "(the flow's field, each unit by its name here)",
+                    stage_key("images"): "(the images' field, each unit by its name here)"})
 
 
 @dataclass(frozen=True)
@@ -208,8 +208,8 @@ def choose(before: Stage, last: Stage, old: dict, new: dict, physical: bool) -> 
     else:
         log.info("data_term=images: the %s field explains the held-out views better than the %s (%.4g against "
                  "%.4g%s RMS of their %s) and is kept", mine, theirs, new[key], old[key], unit, what)
-    return kept, {"data_term_kept": kept, "chosen_by": f"held-out {what}", f"{before.name}_stage": old,
-                  f"{last.name}_stage": new}
+    return kept, {"data_term_kept": kept, "chosen_by": f"held-out {what}", stage_key(before.name): old,
+                  stage_key(last.name): new}
 
 
 def whose(name: str) -> str:
