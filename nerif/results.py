@@ -12,6 +12,7 @@ from typing import Optional
 import numpy as np
 import torch
 
+from nerif.data.diagnostics import UNBOUNDED_DEG, widest_gap_deg
 from nerif.metrics import (flame_share_region, reported_intervals, resolved_peak_figures, temperature_figures,
                            temperature_std, uncertainty_scores, within_intervals)
 from nerif.resolution import effective_resolution_mm, resolved_peak
@@ -160,6 +161,8 @@ def peak_and_uncertainty(solver, scene, vols: dict, flame_above_K: float, warnin
         if amb.temperature_known:
             out.update(reported_intervals(sigma, vols["sigma_std"], amb.temperature_from_sigma, box.axes(),
                                           flame_above_K, lowest, blur_vox=resolution / box.voxel_mm, peak=peak))
+            if widest_gap_deg(scene.cameras) > UNBOUNDED_DEG:  # no view bounds a core's peak from above
+                out["T_peak_interval_K"][1] = float(amb.temperature_from_sigma(np.float64(lowest)))
             out.update(within_intervals(out))
     return out
 

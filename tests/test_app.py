@@ -321,6 +321,10 @@ def test_the_summary_line_names_each_held_out_figure_as_metrics_json_does():
     line = summary_line(m, Path("out"))
     assert "10 it: 7 s training over every session (100.0 ms/it), 6 s in all this session" in line
     assert "PSNR undefined (no deflection seen)" in line  # not "PSNR -inf dB"
+    assert "distances to the background" not in line  # deflections not measured from images: no lever arm given
+    m["measurement"] = {"camera 00": {"noise": 0.01}}  # issue 69: a wrong background distance is a silent scale
+    assert "deflection RMSE 1e-05 rad (its scale and the temperatures' set by the rig's distances to the background" \
+        in summary_line(m, Path("out"))
 
 
 def test_the_summary_line_names_the_peak_temperature_the_true_one_and_the_flames_volume():

@@ -151,7 +151,9 @@ def test_a_wide_missing_wedge_is_said_once_and_a_full_arc_is_not(caplog):
     assert missing_wedge(scene(12, 165.0)) == [] and missing_wedge(scene(9, 160.0)) == []
     msg = missing_wedge(scene(9, 120.0))
     assert len(msg) == 1 and "leave 60 degrees of viewing directions unseen" in msg[0] and "cold" in msg[0]
-    assert msg[0] in caplog.text
+    assert msg[0] in caplog.text and "prior's hottest" not in msg[0]
+    wide = missing_wedge(scene(6, 75.0))  # 7 over 90 less an end view: more directions unseen than seen
+    assert "leave 105 degrees" in wide[0] and "the peak's interval reaches the prior's hottest" in wide[0]
 
 
 def test_a_pitch_that_makes_the_box_fill_the_frame_is_said_before_any_image_is_measured(written, tmp_path, caplog,

@@ -52,3 +52,27 @@ def test_the_results_of_a_trained_field_are_its_volumes_its_evaluation_and_its_h
     view = found.heldout[0]
     assert found.heldout_unit == "px" and view.observed.shape == view.predicted.shape and view.observed.shape[-1] == 2
     assert results(solver, scene, vols, flame_above_K=1000.0, figures=False).heldout == []
+
+
+def test_a_rig_that_leaves_more_directions_unseen_than_seen_bounds_the_peak_by_the_prior_alone():
+    """Issue 66: 7 views over 90 degrees less one held out at an end (a 105 degree gap) read a 1986 K core at 1086
+    K, beyond any spread of its members: the peak's interval then reaches the prior's hottest; 12 views over 165
+    degrees keep the interval the field's spread gives."""
+    from nerif.geometry import ProbeBox
+    from nerif.geometry.camera import arc_rig
+    from nerif.results import peak_and_uncertainty
+
+    box = ProbeBox((17, 17, 17), 1.0)
+    g = np.meshgrid(*[np.arange(17) - 8] * 3, indexing="ij")
+    sigma = float(AMB.sigma_from_temperature(1500.0)) * np.exp(-sum(x**2 for x in g) / (2 * 4.0**2))
+    std = np.full(box.shape, 0.01)
+    vols = {"sigma": sigma, "sigma_std": std, "T": AMB.temperature_from_sigma(sigma),
+            "T_std": temperature_std(AMB, sigma, std)}
+    solver = SimpleNamespace(interval=(-1.05, 0.05), cell_mm=1.5)
+    hot = {}
+    for n, span in ((12, 165.0), (6, 75.0)):
+        scene = SimpleNamespace(ambient=AMB, box=box, ray_spacing_mm=1.0, displacements=object(), truth_T=None,
+                                cameras=arc_rig(n, span))
+        hot[n] = peak_and_uncertainty(solver, scene, vols, 1000.0, [])["T_peak_interval_K"][1]
+    assert hot[6] == pytest.approx(float(AMB.temperature_from_sigma(np.float64(-1.05))))
+    assert 1500.0 < hot[12] < 0.8 * hot[6]

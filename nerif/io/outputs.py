@@ -190,7 +190,9 @@ def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
     if known("T_peak_K"):
         parts.append(temperature_words(m))
     unit = "sigma" if "deflection_unit" in m else "rad"
-    parts.append(f"deflection RMSE {m['deflection_rmse']:.3g} {unit}")
+    scale = (" (its scale and the temperatures' set by the rig's distances to the background, which no image checks)"
+             if unit == "rad" and m.get("measurement") else "")  # measured from images: a lever arm the user gave
+    parts.append(f"deflection RMSE {m['deflection_rmse']:.3g} {unit}{scale}")
     if known("heldout_deflection_rmse"):
         def psnr(k: str) -> str:
             return f"PSNR {m[k]:.1f} dB" if known(k) else "PSNR undefined (no deflection seen)"
