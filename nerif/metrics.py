@@ -185,14 +185,15 @@ def reported_intervals(sigma: np.ndarray, sigma_std: np.ndarray, temperature, ax
     lowest sigma the field may take (its prior's bound: no hotter bound is read).
 
     - ``T_peak_interval_K`` [cold, hot]: where the peak is read through the run's resolution (``peak``, a
-      resolved :class:`nerif.resolution.ResolvedPeak`): its sigma moved colder by z u and hotter by z u and
-      :data:`REMAINDERS` times the correction's next term (what a first order leaves is always hotter), u the
-      standard deviation at the peak (issue 66: on 12 of the 13 shared captures the corrected peak lies within
-      0.0-2.0 u of the truth, RMS 1.1 u; counting the correction's whole size b both ways as well made the
-      intervals +-5-51 % wide for no more held). Otherwise (no ``peak``, or a core about as fine as the run) from the peak voxel's sigma moved
-      colder by z sqrt(u^2 + b^2) to ``sigma - b`` moved hotter by as much, b = G sigma - sigma there (G a Gaussian
-      blur of ``blur_vox`` voxels, the run's resolution): a peak finer than the field resolves is uncertain by
-      about its own difference from its surroundings (issue 59: the bunsen flame's 1861 K read 1533 K).
+      resolved :class:`nerif.resolution.ResolvedPeak`): its sigma moved hotter by z u and :data:`REMAINDERS` times
+      the correction's next term (what a first order leaves of a core is always hotter), and colder by
+      z sqrt(u^2 + b^2), b the correction (a field sharper than the run's resolution model, as exact deflections
+      leave it, is corrected too far), u the standard deviation at the peak. Otherwise (no ``peak``, or a core about
+      as fine as the run) from the peak voxel's sigma moved colder by z sqrt(u^2 + b^2) to ``sigma - b`` moved
+      hotter by as much, b = G sigma - sigma there (G a Gaussian blur of ``blur_vox`` voxels, the run's
+      resolution): a peak finer than the field resolves is uncertain by about its own difference from its
+      surroundings (issue 59: the bunsen flame's 1861 K read 1533 K). On the 13 shared captures (issue 66, two
+      seeds) the first held the truth as often as the second, at two thirds of its width.
     - ``T_peak_position_interval_mm`` [[lo, hi]] per axis: the box of the voxels that could be the hottest, those
       whose hot bound (z u, and z sqrt(u^2 + b^2) at a local peak: the hottest of its 3 x 3 x 3 voxels) reaches
       the peak's cold bound.
@@ -216,8 +217,8 @@ def reported_intervals(sigma: np.ndarray, sigma_std: np.ndarray, temperature, ax
     hot_bound = T(sigma - unresolved - z * either)
     at = np.unravel_index(np.argmax(T(sigma)), sigma.shape)
     cold_peak, hot_peak = float(T(sigma[at] + z * either[at])), float(hot_bound[at])
-    if peak is not None and peak.resolved:  # the correction holds: what it leaves is uncertain, not its size
-        cold_peak = float(T(peak.sigma + z * std[at]))
+    if peak is not None and peak.resolved:  # hotter, the correction leaves its rest; colder, it may be all wrong
+        cold_peak = float(T(peak.sigma + z * np.hypot(std[at], peak.deficit)))
         hot_peak = float(T(peak.sigma - z * std[at] - REMAINDERS * peak.remainder))
     could = hot_bound >= cold_peak
     could[at] = True

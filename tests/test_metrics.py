@@ -161,10 +161,10 @@ def test_a_blurred_cores_peak_read_through_the_resolution_is_closer_and_its_inte
 @pytest.mark.parametrize("width_vox", [3.0, 4.0, 6.0])
 def test_a_resolved_peaks_interval_holds_the_truth_as_often_as_it_says_and_no_more(width_vox):
     """Issue 66: a Gaussian core at 1850 K blurred by the run's resolution (0.8 voxel) and wrong by one offset
-    N(0, u) over the whole field, read through that resolution: the interval about the corrected peak (z u either
-    way, and the correction's rest on the hot side) holds the truth in at least 92 % of the draws; of a wide core
-    (whose correction leaves little) with a standard deviation a third too small, far less often; and it is
-    narrower than the interval that counts the whole correction."""
+    N(0, u) over the whole field, read through that resolution: the interval about the corrected peak (z u
+    hotter, the correction's rest too, and z sqrt(u^2 + b^2) colder) holds the truth in at least 92 % of the draws,
+    with a standard deviation a third too small less often, and is narrower than the interval that counts the
+    correction as an uncertainty both ways and as a move."""
     from scipy.ndimage import gaussian_filter
 
     from nerif.geometry import ProbeBox
@@ -194,8 +194,7 @@ def test_a_resolved_peaks_interval_holds_the_truth_as_often_as_it_says_and_no_mo
                 narrow.append(hi - lo)
                 wider.append(whole[1] - whole[0])
     assert 0.92 <= np.mean(held[1.0]) <= 1.0, np.mean(held[1.0])
-    if width_vox >= 6.0:  # the rest of a narrower core's correction widens its hot side beyond u's share
-        assert np.mean(held[3.0]) < 0.75
+    assert np.mean(held[3.0]) < np.mean(held[1.0])  # on its cold side the correction's size dominates: less so
     assert np.median(narrow) < 0.8 * np.median(wider)
 
 
