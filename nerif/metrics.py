@@ -215,7 +215,8 @@ def reported_intervals(sigma: np.ndarray, sigma_std: np.ndarray, temperature, ax
         return temperature(np.maximum(s, hottest_sigma))
 
     hot_bound = T(sigma - unresolved - z * either)
-    at = np.unravel_index(np.argmax(T(sigma)), sigma.shape)
+    # the peak's own voxel (several may sit at the prior's bound: T alone cannot tell them apart)
+    at = peak.index if peak is not None else np.unravel_index(np.argmax(T(sigma)), sigma.shape)
     cold_peak, hot_peak = float(T(sigma[at] + z * either[at])), float(hot_bound[at])
     if peak is not None and peak.resolved:  # hotter, the correction leaves its rest; colder, it may be all wrong
         cold_peak = float(T(peak.sigma + z * np.hypot(std[at], peak.deficit)))

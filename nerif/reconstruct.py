@@ -203,8 +203,8 @@ def _write(solver, scene, out_dir: Path, board: Board, cfg: DictConfig, device: 
             if cfg.figures:
                 label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
                 write_figures(found, scene, out_dir, solver.history, board.losses,
-                              f"{label}, {solver.iteration} iterations", solver.report.get(stage_key("images", "from_iteration")),
-                              show=board.show)
+                              f"{label}, {solver.iteration} iterations",
+                              solver.report.get(stage_key("images", "from_iteration")), show=board.show)
             metrics = found.metrics
         finally:
             board.close()

@@ -59,7 +59,7 @@ class ResolvedPeak:
     sigma: float
     resolved: bool
     resolution_mm: float
-    remainder: float = 0.0
+    remainder: float
 
 
 def blur_deficit(sigma: np.ndarray, blur_vox: float) -> np.ndarray:

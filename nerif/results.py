@@ -162,7 +162,8 @@ def peak_and_uncertainty(solver, scene, vols: dict, flame_above_K: float, warnin
             out.update(reported_intervals(sigma, vols["sigma_std"], amb.temperature_from_sigma, box.axes(),
                                           flame_above_K, lowest, blur_vox=resolution / box.voxel_mm, peak=peak))
             if widest_gap_deg(scene.cameras) > UNBOUNDED_DEG:  # no view bounds a core's peak from above
-                out["T_peak_interval_K"][1] = float(amb.temperature_from_sigma(np.float64(lowest)))
+                prior = float(amb.temperature_from_sigma(np.float64(lowest)))
+                out["T_peak_interval_K"][1] = max(out["T_peak_interval_K"][1], prior)
             out.update(within_intervals(out))
     return out
 

@@ -25,7 +25,6 @@ ENDINGS = (("_K", "K"), ("_px", "px"), ("_px_none", "px"), ("_px_per_view", "px"
            ("_mm", "mm"), ("_true_mm", "mm"), ("_cm3", "cm^3"), ("_db", "dB"), ("_gib", "GiB"))
 
 
-
 def stage_key(stage: str, figure: str = "stage") -> str:
     """``metrics.json``'s key of a training stage's ``figure`` (stage ``flow``: ``flow_stage``, its figures of the
     field it left; stage ``images``: ``images_from_iteration``, where it began), one spelling for the writer and

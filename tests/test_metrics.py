@@ -214,3 +214,24 @@ def test_a_temperatures_standard_deviation_is_sigmas_times_the_slope_of_t():
     slope = AMB.T0 * k / (1 + k * sigma) ** 2
     np.testing.assert_allclose(AMB.temperature_from_sigma(sigma), AMB.T0 / (1 + k * sigma), rtol=1e-6)
     np.testing.assert_allclose(temperature_std(AMB, sigma, std), slope * std, rtol=1e-6)
+
+
+def test_the_peaks_interval_reads_the_spread_of_the_peaks_own_voxel_where_several_reach_the_prior():
+    """Two voxels beyond the prior's bound read alike in T (both clipped there); the interval about the resolved peak
+    takes the standard deviation of the hottest in sigma, the voxel the peak was read at."""
+    from nerif.geometry import ProbeBox
+    from nerif.metrics import reported_intervals
+    from nerif.physics import Ambient
+    from nerif.resolution import resolved_peak
+
+    amb = Ambient(T0=300.0, n0=1.000293, T_max=2000.0)
+    box = ProbeBox((9, 9, 9), 1.0)
+    sigma = np.full(box.shape, -0.5)
+    sigma[2, 4, 4], sigma[6, 4, 4] = -1.1, -1.3  # the first in memory order is not the hottest
+    std = np.full(box.shape, 0.2)
+    std[6, 4, 4] = 0.001
+    peak = resolved_peak(sigma, 0.0, 1.0, -1.05)
+    assert peak.index == (6, 4, 4)
+    lo, hi = reported_intervals(sigma, std, amb.temperature_from_sigma, box.axes(), 1000.0, -1.05, blur_vox=0.0,
+                                peak=peak)["T_peak_interval_K"]
+    assert lo == pytest.approx(float(amb.temperature_from_sigma(np.float64(-1.05 + 2 * 0.001))))

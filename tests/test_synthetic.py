@@ -38,7 +38,8 @@ def test_supersampling_needs_a_phantom_with_a_grid(tmp_path):
 
 def test_unknown_sensing_is_refused():
     with pytest.raises(ValueError, match="magic.*ideal, perpendicular, realistic"):
-        DATASETS.build({"name": "synthetic", "render_supersample": 1, "phantom": BLOB, "rig": RIG, "T_max": 2000.0, "sensing": "magic"})
+        DATASETS.build({"name": "synthetic", "render_supersample": 1, "phantom": BLOB, "rig": RIG, "T_max": 2000.0,
+                        "sensing": "magic"})
 
 
 def test_ideal_deflections_are_the_blobs_closed_form():
