@@ -15,9 +15,8 @@ import torch
 
 from nerif.data import Scene
 from nerif.data.observation import observations
-from nerif.losses.images import bandpass, photometric_residual
 from nerif.metrics import deflection_rmse, explained_share, flame_region, psnr_db, rmse, value_range
-from nerif.sensing.interpolation import Bicubic, Interpolation
+from nerif.sensing.interpolation import Interpolation, interpolation
 from nerif.sensing.vectors import vector_noise
 from nerif.units import DEFLECTION, SIGMA, declare
 
@@ -42,7 +41,8 @@ UNEXPLAINED = 5.0  # the held-out misfit over the flow's noise beyond which a vi
 UNSEEN = 3.0  # ... and this many times the training views' median (the shared captures: 1.1-2.8, lifted_fine highest)
 CONTRADICTED = 1.5  # a training view explained this many times worse than the median view is called contradicted (the
 # shared captures with their rigs as measured: at most 1.16 times the median, benchmarks/RESULTS.md, issue 58)
-READ = Bicubic()  # how the held-out image residual reads the reference (a monitored figure, kept as it was)
+READ = interpolation("bicubic")  # how heldout_photometric_rmse reads the reference: one reading for every run,
+# whatever its data_term.interpolation, so that the figure compares runs (a monitored figure, kept as it was)
 Predict = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (R, 3) origins [mm], dirs -> (R, 3) sigma units
 
 
@@ -214,10 +214,7 @@ class Evaluation:
         for v in views.unique().tolist():
             sel, view = views == v, models[v]
             u = view.displacement(eps[sel].double() / h.scale, index[sel] - view.rays.start)
-            x = view.pixels(h.pixel[index[sel]])  # (R, b^2, 2)
-            u = u[:, None, :].expand(-1, x.shape[1], -1)
-            ref, dist = (bandpass(i.double(), highpass_px, lowpass_px) for i in (view.reference, view.distorted))
-            r = photometric_residual(read.grid(ref), dist, x.reshape(-1, 2), u.reshape(-1, 2), read)
+            r = view.residual(u, read, view.images(read, highpass_px, lowpass_px), h.pixel[index[sel]])
             total, count = total + float(r.pow(2).sum()), count + r.numel()
         return (total / max(count, 1)) ** 0.5
 

@@ -66,7 +66,7 @@ def test_a_run_writes_every_output(tmp_path):
         assert tag in tags["scalars"], tag
     assert {"slices", "profiles"} <= set(tags["images"]), tags["images"]
     # resume to 30 iterations from the checkpoint
-    r2 = nerif_here(*TINY, "train.iterations=30", f"train.resume={out / 'checkpoint.pt'}",
+    r2 = nerif_here(*TINY, "train.iterations=30", f"train.resume={out / 'checkpoint.pt'}", "figures=false",
                     f"hydra.run.dir={tmp_path / 'more'}")
     assert r2.returncode == 0, r2.stderr[-2000:]
     assert json.loads((tmp_path / "more" / "metrics.json").read_text())["iterations"] == 30

@@ -7,6 +7,7 @@ from nerif.configs import group
 from nerif.data import DATASETS
 from nerif.data.observation import observations
 from nerif.sensing.imaging import warp
+from nerif.sensing.interpolation import interpolation
 from tests.helpers import tiny_config
 
 REALISTIC = ("data.sensing=realistic", "data.sensor.aperture_rays=1", "data.sensor.image_binning=4",
@@ -41,6 +42,14 @@ def test_a_fields_deflections_become_the_displacements_the_images_hold(scene):
         at_truth = (seen - dist)[moving].pow(2).mean().sqrt()
         at_none = (ref - dist)[moving].pow(2).mean().sqrt()
         assert float(at_truth) < 0.6 * float(at_none), (float(at_truth), float(at_none))
+        # the view's own residual, read by a registered interpolation, says the same of the same pixels
+        for read in (interpolation("bicubic"), interpolation("bandlimited")):
+            images = view.images(read)
+            r_truth, r_none = view.residual(u, read, images), view.residual(torch.zeros_like(u), read, images)
+            assert r_truth.shape == (len(u), b * b)
+            sel = moving[xi[:, 1], xi[:, 0]].reshape(len(u), b * b)
+            ratio = float(r_truth[sel].pow(2).mean().sqrt() / r_none[sel].pow(2).mean().sqrt())
+            assert ratio < 0.7, ratio
 
 
 def test_units_and_the_shake_convert_in_one_place(scene):

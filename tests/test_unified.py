@@ -7,7 +7,7 @@ from nerif.configs import group
 from nerif.data import DATASETS
 from nerif.losses.images import bandpass, block_pixels
 from nerif.sensing.displacement import displacement_matrix
-from nerif.sensing.interpolation import sample
+from nerif.sensing.interpolation import interpolation, sample
 from nerif.solvers.voxel.unified import unified_system
 from tests.helpers import solver, tiny_config
 
@@ -36,7 +36,7 @@ def test_the_unified_operator_passes_the_adjoint_identity(scene, linearize_at):
 def test_two_rows_per_ray_are_the_least_squares_of_every_pixel_of_its_block(scene):
     """sum over the block's pixels of (g . u - (I_dist - I_ref))^2 = |M eps - c|^2 + const for any eps: the
     difference between two deflections' costs is the same computed either way."""
-    M, c = unified_system(scene, 8.0, "zero", deflection_units=False)
+    M, c = unified_system(scene, 8.0, "zero", deflection_units=False, read=interpolation("bicubic"))
     v, cam, im = 1, scene.cameras[1], scene.images[1]
     b = cam.binning // im.camera.binning
     sl = scene.view_slice(v)
@@ -85,4 +85,4 @@ def test_the_rows_weigh_a_deflection_as_the_flows_rows_do(scene):
     def worth(M):
         return float((M @ d[..., None]).pow(2).sum((-1, -2)).mean() / d.pow(2).sum(-1).mean())
 
-    assert 0.5 < worth(unified_system(scene, 8.0, "zero")[0]) < 2.0
+    assert 0.5 < worth(unified_system(scene, 8.0, "zero", read=interpolation("bandlimited"))[0]) < 2.0

@@ -1,6 +1,7 @@
 """What one view's camera records of a field: the one place a field's deflections become the pixels of that view's
 images, for every consumer that compares a field with the images (the image term, unified BOS, the held-out
-image residual).
+image residual): :func:`image_displacement` the forward model, :meth:`ViewObservation.residual` the images' misfit
+of a displacement, read by a registered interpolation (:mod:`nerif.sensing.interpolation`).
 
 Units, converted here and nowhere else: deflections in units of sigma (``Scene.observed``'s) or radians; image
 displacements in pixels of the full sensor (what the measurement stage reports, ``Scene.displacement_px``) or in
@@ -12,7 +13,16 @@ from dataclasses import dataclass
 
 import torch
 
-from nerif.losses.images import block_pixels
+from nerif.losses.images import bandpass, block_pixels, photometric_residual
+from nerif.sensing.interpolation import Interpolation
+
+
+def image_displacement(gain_px: torch.Tensor, eps: torch.Tensor, shake_px: torch.Tensor) -> torch.Tensor:
+    """The forward model of a view's images: (..., 2, 3) ``gain_px`` [image px per unit of sigma deflection],
+    (..., 3) deflections ``eps`` [sigma] and (..., 2) the camera's shake ``shake_px`` [image px] -> (..., 2) the
+    displacement [image px] the distorted image holds against the reference: the field's and the shake. In the
+    gain's dtype."""
+    return (gain_px * eps.to(gain_px.dtype)[..., None, :]).sum(-1) + shake_px.to(gain_px.dtype)
 
 
 @dataclass(frozen=True)
@@ -45,8 +55,7 @@ class ViewObservation:
         """(R, 3) deflections of sigma of the view's rays ``rows`` (indices among its own rays; default: all) ->
         (R, 2) the displacements [image px] its distorted image holds against its reference there: the field's,
         and the camera's shake."""
-        gain = self.gain_px if rows is None else self.gain_px[rows]
-        return (gain @ eps.to(gain.dtype)[..., None])[..., 0] + self.shake_px
+        return image_displacement(self.gain_px if rows is None else self.gain_px[rows], eps, self.shake_px)
 
     def image_px(self, u_sensor_px: torch.Tensor) -> torch.Tensor:
         """(..., 2) displacements [px of the full sensor] -> [image px]."""
@@ -60,6 +69,25 @@ class ViewObservation:
         """(n, b^2, 2) the image pixels (column, row) of the blocks of rays ``pixel`` (their flat ray-grid indices;
         default: every ray of the view), row-major from each block's top-left pixel."""
         return block_pixels(self.pixel if pixel is None else pixel, self.width, self.block)
+
+    def images(self, read: Interpolation, highpass_px: float | None = None,
+               lowpass_px: float | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """The view's images as a residual compares them (float64): the reference's grid ``read`` reads
+        (:meth:`~nerif.sensing.interpolation.Interpolation.grid`) and the (H, W) distorted image, both band-passed
+        first where ``highpass_px`` or ``lowpass_px`` [image px] is set (:func:`~nerif.losses.images.bandpass`)."""
+        ref, dist = (bandpass(i.double(), highpass_px, lowpass_px) for i in (self.reference, self.distorted))
+        return read.grid(ref), dist
+
+    def residual(self, u: torch.Tensor, read: Interpolation, images: tuple[torch.Tensor, torch.Tensor],
+                 pixel: torch.Tensor | None = None) -> torch.Tensor:
+        """(n, 2) displacements [image px] of the rays ``pixel`` (flat ray-grid indices; default: every ray of the
+        view), one for each ray's block of image pixels -> (n, b^2) ``I_ref(x + u) - I_dist(x)`` at those pixels
+        (sensor noise where ``u`` is right), the reference read by ``read`` from ``images`` (:meth:`images`)."""
+        x = self.pixels(pixel)  # (n, b^2, 2)
+        grid, dist = images
+        r = photometric_residual(grid, dist, x.reshape(-1, 2), u[:, None, :].expand(-1, x.shape[1], -1).reshape(-1, 2),
+                                 read)
+        return r.reshape(x.shape[:2])
 
 
 def observations(scene) -> list[ViewObservation]:

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from nerif.data import Scene
-from nerif.data.observation import observations
+from nerif.data.observation import image_displacement, observations
 from nerif.losses import deflection_terms
 from nerif.losses.images import bandpass, cached_photometric_scale, cell_origin, cell_weights, photometric_residual
 from nerif.registry import Registry
@@ -341,11 +341,12 @@ class ImageTerm(DeflectionTerm):
         offsets, weights = self.cell_pixels(len(top))
         x = (x[:, None, :] + offsets).reshape(-1, 2)
         A = self.gain[batch.index]  # (R, 2, 3)
+        ray_views = torch.searchsorted(s.view_start, batch.index, right=True) - 1
+        shake = (self.shake + self.shake_correction)[ray_views]  # (R, 2): each ray's view's
         out = {}
         for name, e in eps.items():
-            u = cells((A * e[:, None, :]).sum(-1))  # (C, 4, 2) [image px]
-            shake = (self.shake + self.shake_correction)[views][:, None, :]
-            u = torch.einsum("cpk,ckd->cpd", weights.to(u.dtype), u) + shake.to(u.dtype)
+            u = cells(image_displacement(A, e, shake))  # (C, 4, 2) [image px]
+            u = torch.einsum("cpk,ckd->cpd", weights.to(u.dtype), u)
             r = photometric_residual(self.reference, self.distorted, x, u.reshape(-1, 2), self.read)
             out[name] = (r.reshape(len(top), -1).pow(2).mean(-1) / self.scale[top]).mean()
         if self.flow_weight > 0:
@@ -365,7 +366,7 @@ class ImageTerm(DeflectionTerm):
         shake = (self.shake + self.shake_correction)[views]
         out = {}
         for name, e in eps.items():
-            u = (A * e[:, None, :]).sum(-1) + shake.to(e.dtype)
+            u = image_displacement(A, e, shake)
             r = photometric_residual(self.reference, self.distorted, x, u, self.read)
             out[name] = (r.pow(2) / self.scale[top]).mean()
         if self.flow_weight > 0:

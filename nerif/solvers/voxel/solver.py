@@ -12,6 +12,7 @@ import torch
 from nerif.geometry import box_faces
 from nerif.renderers.deflection import perpendicular
 from nerif.renderers.voxel import voxel_deflection
+from nerif.sensing.interpolation import interpolation
 from nerif.solvers.base import SOLVERS, IterativeSolver, check_faces
 from nerif.solvers.data_terms import DATA_TERMS, noise_weights
 from nerif.solvers.voxel.cgls import CGLS, REGULARIZERS
@@ -49,7 +50,7 @@ def built_projector(name: str, box, origins: torch.Tensor, dirs: torch.Tensor, s
 
 
 # the data_term settings CGLS reads (two-step and unified BOS); any other one set away from its default is refused
-VOXEL_READS = ("name", "highpass_px", "lowpass_px", "noise_weighted")
+VOXEL_READS = ("name", "highpass_px", "lowpass_px", "interpolation", "noise_weighted")
 
 
 def settings_not_read(data_term: Mapping) -> list[str]:
@@ -115,7 +116,8 @@ class CGLSSolver(IterativeSolver):
         if unused:
             raise ValueError(f"{', '.join(unused)}: solver=cgls does not use {'it' if len(unused) == 1 else 'them'} "
                              "(the neural solver's image term does; unified BOS, data_term=images, takes "
-                             "data_term.highpass_px and lowpass_px; both weigh the views by data_term.noise_weighted)")
+                             "data_term.highpass_px, lowpass_px and interpolation; both weigh the views by "
+                             "data_term.noise_weighted)")
         if linearize_at not in ("zero", "flow"):
             raise ValueError(f"solver.linearize_at must be zero or flow, got '{linearize_at}'")
         self.linearize_at = linearize_at
@@ -152,7 +154,8 @@ class CGLSSolver(IterativeSolver):
         if self.fitted == "images":  # unified BOS: rows of the images' linearised equations
             self.labels["data_term"] = "images"
             M, c = unified_system(scene, self.data_term.get("highpass_px"), self.linearize_at,
-                                  lowpass_px=self.data_term.get("lowpass_px"))
+                                  lowpass_px=self.data_term.get("lowpass_px"),
+                                  read=interpolation(self.data_term["interpolation"]))
             M, b = M.to(dt) * (rw if w is None else rw[..., None]), c.to(dt) * rw
             P = (lambda e: (M @ e[..., None])[..., 0])
             Pt = (lambda y: (M.transpose(1, 2) @ y[..., None])[..., 0])

@@ -14,12 +14,12 @@ from __future__ import annotations
 import torch
 
 from nerif.data.observation import observations
-from nerif.losses.images import bandpass, cached_photometric_scale
-from nerif.sensing.interpolation import Bicubic, sample
+from nerif.losses.images import cached_photometric_scale
+from nerif.sensing.interpolation import Interpolation
 
 
 def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: float = 0.01, lowpass_px=None,
-                   deflection_units: bool = True):
+                   deflection_units: bool = True, *, read: Interpolation):
     """The unified system of every ray of ``scene``: ``M`` (N, 2, 3) with ``M eps = L^T A eps`` (``eps`` in sigma
     units) and its right-hand side ``c`` (N, 2), in float64 on the scene's device.
 
@@ -34,6 +34,8 @@ def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: floa
             regulariser's ``lam`` then weighs the same for both data. In intensity units, on the independent
             capture, a row's squared residual was 0.011 of the deflection's: the flow's bracket of weights was
             about 90x too strong there. False: the pixels' own equations (intensity units).
+        read: how the reference is read between its pixels (``data_term.interpolation``,
+            :mod:`nerif.sensing.interpolation`), as the image term reads it.
     """
     lacks = scene.lacks_image_model()
     if lacks:
@@ -45,22 +47,19 @@ def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: floa
     Ms, cs = [], []
     for view in observations(scene):
         A = view.gain_px  # (n, 2, 3) image px per sigma unit
-        ref, dist = (bandpass(i.double(), highpass_px, lowpass_px) for i in (view.reference, view.distorted))
-        x = view.pixels().double()  # (n, P, 2)
+        images = view.images(read, highpass_px, lowpass_px)
         u0 = view.image_px(scene.displacement_px[view.rays].double()) if linearize_at == "flow" else \
-            A.new_zeros(len(A), 2)
-        shake = view.shake_px  # the view's shake, which the images hold
-        p = (x + u0[:, None, :] + shake.to(x.dtype)).reshape(-1, 2)
-        grads = [(sample(ref, p + step_px * p.new_tensor(e)) - sample(ref, p - step_px * p.new_tensor(e))) / (2 * step_px)
-                 for e in ((1.0, 0.0), (0.0, 1.0))]
-        g = torch.stack(grads, -1).reshape(len(A), -1, 2)  # (n, P, 2)
-        xi = x.reshape(-1, 2).long()
-        diff = (dist[xi[:, 1], xi[:, 0]] - sample(ref, p)).reshape(len(A), -1)  # I_dist(x) - I_ref(x + u0)
+            A.new_zeros(len(A), 2)  # the field's displacement linearised about
+        at = u0 + view.shake_px  # ... and the shake, which the images hold
+        steps = [at.new_tensor(e) * step_px for e in ((1.0, 0.0), (0.0, 1.0))]
+        g = torch.stack([(view.residual(at + e, read, images) - view.residual(at - e, read, images)) / (2 * step_px)
+                         for e in steps], -1)  # (n, P, 2) the reference's gradient at x + at
+        diff = -view.residual(at, read, images)  # I_dist(x) - I_ref(x + at)
         G = g.transpose(1, 2) @ g  # (n, 2, 2)
         h = (g * diff[..., None]).sum(1) + (G @ u0[..., None])[..., 0]
         G = G + 1e-9 * G.diagonal(dim1=1, dim2=2).sum(-1).mean() * torch.eye(2, dtype=G.dtype, device=G.device)
         L = torch.linalg.cholesky(G)
-        unit = b * cached_photometric_scale(ref, A, Bicubic(), scene.cache_dir) ** 0.5 if deflection_units else 1.0
+        unit = b * cached_photometric_scale(images[0], A, read, scene.cache_dir) ** 0.5 if deflection_units else 1.0
         Ms.append(L.transpose(1, 2) @ A / unit)
         cs.append(torch.linalg.solve_triangular(L, h[..., None], upper=False)[..., 0] / unit)
     return torch.cat(Ms), torch.cat(cs)
