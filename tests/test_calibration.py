@@ -107,15 +107,17 @@ def test_the_keys_the_data_readme_lists_are_the_keys_nerif_reads():
 
 def test_a_calibrated_rig_reconstructs_within_a_bound_of_the_arc(tmp_path):
     """The same blob through an arc and through ``rig=calibrated`` (the same sensor, distances and span), ideal
-    deflections: the calibrated rig's error within 1.5x the arc's (0.9-1.1x measured)."""
+    deflections, rays 1.5 mm apart at the probe: both reconstruct it (0.31 of sigma's norm measured for either;
+    rays 6 mm apart left 0.9, nothing to compare) and the calibrated rig's error is within 1.3x the arc's (1.02x)."""
     from nerif.app import run
     from tests.helpers import tiny_config
 
     common = ["rig.n_cameras=6", "rig.span_deg=160", "rig.width_px=360", "rig.height_px=640", "rig.pitch_um=40",
-              "rig.binning=20", "train.iterations=200", "train.eval_every=100", "data.sensing=perpendicular"]
+              "rig.binning=5", "train.iterations=100", "train.eval_every=100", "data.sensing=perpendicular"]
     arc = run(tiny_config(*common, "rig.distance_mm=820", "rig.background_behind_mm=750"), tmp_path / "arc")
     cal = run(tiny_config("rig=calibrated", *common), tmp_path / "cal")
-    assert cal["sigma_relative_error"] < 1.5 * arc["sigma_relative_error"], (cal, arc)
+    assert arc["sigma_relative_error"] < 0.45, arc
+    assert cal["sigma_relative_error"] < 1.3 * arc["sigma_relative_error"], (cal, arc)
 
 
 def test_a_capture_written_through_a_calibrated_rig_reads_back_its_cameras_and_rays(tmp_path):
