@@ -13,6 +13,7 @@ from torch.optim.swa_utils import AveragedModel
 
 from nerif.geometry import ProbeBox
 from nerif.physics import Ambient
+from nerif.resolution import FLAME
 from nerif.units import SHARE, declare
 
 log = logging.getLogger(__name__)
@@ -217,7 +218,7 @@ def check_truth_within(truth_T: Optional[np.ndarray], ambient: Ambient, prior: t
 def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Ambient,
                      truth_T: Optional[np.ndarray] = None, failed: str = "", source: Optional[str] = None) -> dict:
     """What a reconstruction ``sigma`` says about the prior's bounds, for ``metrics.json``: the share of the flame
-    (voxels below -0.05) within 1 % of the lower bound (``warnings`` over 1 %: the flame may be hotter than
+    (voxels below -:data:`~nerif.resolution.FLAME`) within 1 % of the lower bound (``warnings`` over 1 %: the flame may be hotter than
     ``data.T_max`` lets the field be), and the share of the probe box within 1 % of the upper, cold bound
     (``warnings`` over 5 %: a flame holds no gas much colder than ambient, so a field pressed there was fitted to
     data it cannot explain: deflections of the wrong sign, or a geometry that does not match the images; normal
@@ -226,7 +227,7 @@ def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Amb
     where the held-out views say the fit failed (``failed``: :meth:`nerif.evaluation.Evaluation.failed`'s sentence): the
     data then do not support a hotter flame, and raising the bound is not the advice."""
     a, b = prior
-    flame = sigma < -0.05
+    flame = sigma < -FLAME
     share = float((sigma[flame] <= a + 0.01 * (b - a)).mean()) if flame.any() else 0.0
     cold = float((sigma >= b - 0.01 * (b - a)).mean()) if sigma.size else 0.0
     out = {"flame_at_prior_bound": share, "box_at_cold_bound": cold}

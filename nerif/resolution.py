@@ -26,7 +26,8 @@ import numpy as np
 
 TENT = 1.0 / np.sqrt(6.0)  # the standard deviation of a linear interpolation's tent, in cells
 UNRESOLVED = 0.10  # a first-order correction above this share of the peak's sigma: the core is as fine as the run
-FLAME = 0.05  # a peak of sigma above -FLAME is no flame (the flame's voxels, nerif.field.prior_saturation)
+FLAME = 0.05  # a voxel of sigma above -FLAME is no flame: a peak there has no core to resolve, and
+# nerif.field.prior_saturation counts the flame's voxels below it
 
 
 def effective_resolution_mm(cell_mm: float, ray_spacing_mm: float) -> float:
