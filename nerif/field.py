@@ -219,8 +219,8 @@ def prior_saturation(sigma: np.ndarray, prior: tuple[float, float], ambient: Amb
                      truth_T: Optional[np.ndarray] = None, failed: str = "", source: Optional[str] = None) -> dict:
     """What a reconstruction ``sigma`` says about the prior's bounds, for ``metrics.json``: the share of the flame
     (voxels below -:data:`~nerif.resolution.FLAME`) within 1 % of the lower bound (``warnings`` over 1 %: the flame
-    may be hotter than ``data.T_max`` lets the field be), and the share of the probe box within 1 % of the upper, cold bound
-    (``warnings`` over 5 %: a flame holds no gas much colder than ambient, so a field pressed there was fitted to
+    may be hotter than ``data.T_max`` lets the field be), and the share of the probe box within 1 % of the upper,
+    cold bound (``warnings`` over 5 %: a flame holds no gas much colder than ambient, so a field pressed there was fitted to
     data it cannot explain: deflections of the wrong sign, or a geometry that does not match the images; normal
     runs leave none there, the multicam capture read without its lens model 2 %). With a known truth
     (``truth_T`` [K]) far from the hot bound, a flame at that bound is said to be a fit gone astray instead; so it is
