@@ -21,8 +21,9 @@ from nerif.solvers.base import SOLVERS, DivergenceError, IterativeSolver, check_
 from nerif.solvers.batches import RayBatcher
 from nerif.solvers.data_terms import DATA_TERMS
 from nerif.solvers.poses import POSES, log_refined
-from nerif.solvers.stages import HeldoutChoice, Stage, StagePlan, stage_key
+from nerif.solvers.stages import HeldoutChoice, Stage, StagePlan
 from nerif.solvers.training import Optimisation, SampleCounts, Training, allocations, warm_start
+from nerif.units import stage_key
 
 log = logging.getLogger(__name__)
 
@@ -94,8 +95,7 @@ class NeuralSolver(IterativeSolver):
         self.iterations = self.plan.iterations
         self.poses.setup(scene, self.iterations)
         figures = (lambda: self.evaluation.stage_figures(self.predict, self.reconstruction, self.data_term))
-        self.choice = HeldoutChoice(self.plan, figures if scene.heldout is not None else None,
-                                    self.evaluation.physical)
+        self.choice = HeldoutChoice(self.plan, figures if scene.heldout is not None else None, self.evaluation.physical)
         if self.data_term.fitted != "flow":
             self.labels["data_term"] = self.data_term.fitted
         for stage, end in zip(self.plan.stages, self.plan.ends):

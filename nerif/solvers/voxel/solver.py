@@ -50,7 +50,10 @@ def built_projector(name: str, box, origins: torch.Tensor, dirs: torch.Tensor, s
 
 
 # the data_term settings CGLS reads (two-step and unified BOS); any other one set away from its default is refused
-VOXEL_READS = ("name", "highpass_px", "lowpass_px", "interpolation", "noise_weighted")
+VOXEL_READS = ("name", "highpass_px", "lowpass_px", "noise_weighted")
+# how unified BOS reads the reference: the bandlimited reading of the image term was better on 10 of the 13 shared
+# captures (geometric mean 0.89x) but worse on 3 (1.006-1.015x) with TV 0.1 (benchmarks/RESULTS.md, issue 68): kept
+UNIFIED_READ = interpolation("bicubic")
 
 
 def settings_not_read(data_term: Mapping) -> list[str]:
@@ -116,8 +119,7 @@ class CGLSSolver(IterativeSolver):
         if unused:
             raise ValueError(f"{', '.join(unused)}: solver=cgls does not use {'it' if len(unused) == 1 else 'them'} "
                              "(the neural solver's image term does; unified BOS, data_term=images, takes "
-                             "data_term.highpass_px, lowpass_px and interpolation; both weigh the views by "
-                             "data_term.noise_weighted)")
+                             "data_term.highpass_px and lowpass_px; both weigh the views by data_term.noise_weighted)")
         if linearize_at not in ("zero", "flow"):
             raise ValueError(f"solver.linearize_at must be zero or flow, got '{linearize_at}'")
         self.linearize_at = linearize_at
@@ -155,7 +157,7 @@ class CGLSSolver(IterativeSolver):
             self.labels["data_term"] = "images"
             M, c = unified_system(scene, self.data_term.get("highpass_px"), self.linearize_at,
                                   lowpass_px=self.data_term.get("lowpass_px"),
-                                  read=interpolation(self.data_term["interpolation"]))
+                                  read=UNIFIED_READ)
             M, b = M.to(dt) * (rw if w is None else rw[..., None]), c.to(dt) * rw
             P = (lambda e: (M @ e[..., None])[..., 0])
             Pt = (lambda y: (M.transpose(1, 2) @ y[..., None])[..., 0])

@@ -34,8 +34,8 @@ def unified_system(scene, highpass_px, linearize_at: str = "zero", step_px: floa
             regulariser's ``lam`` then weighs the same for both data. In intensity units, on the independent
             capture, a row's squared residual was 0.011 of the deflection's: the flow's bracket of weights was
             about 90x too strong there. False: the pixels' own equations (intensity units).
-        read: how the reference is read between its pixels (``data_term.interpolation``,
-            :mod:`nerif.sensing.interpolation`), as the image term reads it.
+        read: how the reference is read between its pixels (:mod:`nerif.sensing.interpolation`; the voxel
+            solver's: :data:`nerif.solvers.voxel.solver.UNIFIED_READ`).
     """
     lacks = scene.lacks_image_model()
     if lacks:
