@@ -13,11 +13,9 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import OverrideParseException
 from omegaconf import DictConfig
 
-from nerif.app import run, unexpected
-from nerif.configs import check_kinds, config_dir, group_choices, unknown_override
+from nerif.configs import check_kinds, compose, config_dir, group_choices, unknown_override
 from nerif.export import write_json
 from nerif.io.summary import FAILED
-from nerif.solvers import DivergenceError, Interrupted
 
 
 def parallel_jobs() -> int:
@@ -35,7 +33,7 @@ def check_overrides(cfg: DictConfig, overrides) -> None:
     config of the same config-group choices), or one the run ignores: the synthetic rig's (``rig.*``) with
     recorded data, whose cameras come from the data's own files."""
     try:
-        defaults = hydra.compose(config_name="config", overrides=group_choices(overrides))
+        defaults = compose(group_choices(overrides))
     except Exception as e:  # a launcher that left Hydra's config search uninitialised: the components check
         logging.getLogger("nerif").debug("the settings' kinds are not checked here: %s", e)
         defaults = None
@@ -81,6 +79,12 @@ def stop(message: str) -> float:
 def main(cfg: DictConfig) -> float:
     try:
         check_overrides(cfg, HydraConfig.get().overrides.task)
+    except ValueError as e:  # said before torch and the rest are imported (seconds)
+        return stop(str(e))
+    from nerif.app import run, unexpected
+    from nerif.solvers import DivergenceError, Interrupted
+
+    try:
         metrics = run(cfg, HydraConfig.get().runtime.output_dir, parallel_jobs())
     except (ValueError, FileNotFoundError, DivergenceError) as e:  # bad input or a diverged run: one sentence
         return stop(str(e.args[0] if len(e.args) == 1 else e))  # an OSError's own: "[Errno 2] ...: 'path'"

@@ -13,7 +13,6 @@ from typing import Callable, Optional
 from xml.sax.saxutils import escape
 
 import numpy as np
-import torch
 
 
 def _umask() -> int:
@@ -40,6 +39,8 @@ def atomic_write(path: Path, write: Callable[[str], None]) -> Path:
 
 def tensor_bytes(obj) -> int:
     """The bytes of every tensor in ``obj`` (nested dicts, lists, tuples): about what ``torch.save`` writes."""
+    import torch  # here, not at the top: a bad setting is said before torch's seconds of import
+
     if isinstance(obj, torch.Tensor):
         return obj.numel() * obj.element_size()
     if isinstance(obj, dict):
@@ -54,6 +55,8 @@ def atomic_save_torch(obj, path: Path) -> Path:
     torch's zip writer reports a full disk in several words ("PytorchStreamWriter failed writing file", "[enforce
     fail at inline_container.cc] . unexpected pos"): the cause is read from the file system instead, a disk with
     less free space than the object's tensors being full whatever the message."""
+    import torch
+
     def write(tmp):
         try:
             torch.save(obj, tmp)

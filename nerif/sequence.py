@@ -30,7 +30,7 @@ from nerif.data.frames import FRAMES, Frame
 from nerif.geometry import ProbeBox
 from nerif.export import write_json, write_pvd
 from nerif.io.outputs import summary_line
-from nerif.io.plots import save_figure, sequence_figure, slice_figure
+from nerif.io.plots import save_figure, sequence_figure
 from nerif.io.summary import COLUMNS, write_tables
 from nerif.reconstruct import reconstruct, resuming
 from nerif.solvers import SOLVERS
@@ -143,15 +143,15 @@ def frame_volume(folder: Path):
 
 
 def log_frame(writer, row: dict, folder: Path, figures: bool = True) -> None:
-    """One TensorBoard step per frame (step = frame index): its final metrics and (``figures``) slices."""
+    """One TensorBoard step per frame (step = frame index): its final metrics and (``figures``) slices, as the
+    frame's ``slices.png`` holds them (drawn once: a figure of 16 panels takes 1-2 s)."""
     for k, v in row.items():
         if k not in ("frame", "folder") and isinstance(v, (int, float)) and v is not None:
             writer.add_scalar(f"frame/{k}", float(v), row["frame"])
-    if figures:
-        vol, truth, unit, box = frame_volume(folder)
-        writer.add_figure("frame/slices", slice_figure(vol, box, truth,
-                                                       f"frame {row['frame']}, t = {row['time_s']:.4g} s", unit=unit),
-                          row["frame"])
+    if figures and (folder / "slices.png").is_file():
+        from matplotlib.image import imread
+
+        writer.add_image("frame/slices", imread(folder / "slices.png"), row["frame"], dataformats="HWC")
     writer.flush()
 
 

@@ -373,9 +373,9 @@ def test_a_bug_is_one_sentence_and_its_traceback_is_there_with_debug(tmp_path):
     """Issue 38: any exception becomes one sentence naming it (OpenCV's, torch's and a TypeError from a value of
     the wrong kind reached the user raw); ``debug=true`` shows the traceback."""
     def call(*extra):
-        code = ("import sys, nerif.__main__ as m\n"
+        code = ("import sys, nerif.__main__ as m, nerif.app\n"
                 "def broken(*args):\n    return {}['missing']\n"
-                f"m.run = broken\nsys.argv = ['nerif', 'device=cpu', 'hydra.run.dir={tmp_path}', *{list(extra)!r}]\n"
+                f"nerif.app.run = broken\nsys.argv = ['nerif', 'device=cpu', 'hydra.run.dir={tmp_path}', *{list(extra)!r}]\n"
                 "m.main()\n")
         return subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
 

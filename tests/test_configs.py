@@ -33,6 +33,27 @@ def test_the_configs_are_the_repository_conf_folder_in_a_checkout():
     assert (config_dir() / "config.yaml").is_file() and (config_dir() / "solver" / "cgls.yaml").is_file()
 
 
+def test_a_config_is_composed_once_and_again_when_a_file_changes(tmp_path, monkeypatch):
+    """compose() keeps a composed config for the same overrides (a copy each call, so a caller's edit stays its
+    own) and composes again once a config file changes: never a stale config."""
+    import os
+    import shutil
+
+    import nerif.configs
+
+    conf = tmp_path / "conf"
+    shutil.copytree(config_dir(), conf)
+    monkeypatch.setattr(nerif.configs, "config_dir", lambda: conf)
+    first = compose(["encoder=hash"])
+    first.train.iterations = 7
+    assert compose(["encoder=hash"]).train.iterations == 1200  # the caller's edit is not the next call's config
+    text = (conf / "config.yaml").read_text()
+    (conf / "config.yaml").write_text(text.replace("iterations: 1200 ", "iterations: 1300 ", 1))
+    stat = (conf / "config.yaml").stat()  # the same size: only the time tells the edit
+    os.utime(conf / "config.yaml", ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))
+    assert compose(["encoder=hash"]).train.iterations == 1300
+
+
 def test_every_config_group_of_the_registries_has_its_yaml():
     assert len(OPTIONS) >= 20
     for g, reg in REGISTRIES.items():
