@@ -66,6 +66,12 @@ class Ambient:
         return self.T_max is not None
 
     @property
+    def deflection_unit(self) -> str:
+        """The unit of the deflections: ``rad`` where sigma maps to temperatures, else ``sigma`` (the data are
+        deflections of sigma: no physical scale)."""
+        return "rad" if self.temperature_known else "sigma"
+
+    @property
     def delta_thre(self) -> float:
         """``|delta|`` at ``T_max`` (dimensionless, ~1e-4 in air); 1 when ``T_max`` is unknown."""
         if self.T_max is None:

@@ -17,7 +17,8 @@ from nerif.configs import group
 from nerif.data import DATASETS
 from nerif.data.diagnostics import check_sign, ill_posed, missing_wedge
 from nerif.export import write_json
-from nerif.io.outputs import (RESULTS, summary_line, volume_slices, write_figures, write_masks, write_rig, write_sensing,
+from nerif.io.headline import Headline, summary_line
+from nerif.io.outputs import (RESULTS, volume_slices, write_figures, write_masks, write_rig, write_sensing,
                               write_volumes)
 from nerif.masks import MASKS
 from nerif.results import final_volumes, results
@@ -249,7 +250,7 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
     metrics = _write(solver, scene, out_dir, board, cfg, device, rig_warnings, records, about,
                      {"setup_time_s": setup_s, "t_start": t_start}, threads)
     solver.checkpoint(checkpoint)  # after the results: on a nearly full disk, they take the room first
-    print(summary_line(metrics, out_dir), flush=True)
+    print(summary_line(Headline.of(metrics, scene.ambient.deflection_unit), out_dir), flush=True)
     if received:
         raise Interrupted(received[0])
     return metrics

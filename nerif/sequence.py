@@ -29,7 +29,7 @@ from omegaconf import DictConfig, OmegaConf
 from nerif.data.frames import FRAMES, Frame
 from nerif.geometry import ProbeBox
 from nerif.export import write_json, write_pvd
-from nerif.io.outputs import summary_line
+from nerif.io.headline import Headline, summary_line
 from nerif.io.plots import save_figure, sequence_figure
 from nerif.io.summary import COLUMNS, write_tables
 from nerif.reconstruct import reconstruct, resuming
@@ -129,7 +129,8 @@ def run_sequence(cfg: DictConfig, out_dir: Path, device: torch.device, frames: l
     metrics["total_time_s"] = time.perf_counter() - t_start
     metrics["units"] = metric_units(metrics)
     write_json(metrics, out_dir / "metrics.json")
-    print(summary_line(metrics, out_dir, f"{len(rows)} frame{'s' * (len(rows) != 1)}, means: "), flush=True)
+    headline = Headline.of(metrics, "sigma" if unit is not None else "rad")  # metrics.json: sigma where it says so
+    print(summary_line(headline, out_dir, f"{len(rows)} frame{'s' * (len(rows) != 1)}, means: "), flush=True)
     return metrics
 
 

@@ -1,5 +1,5 @@
 """Every file a reconstruction writes: the volumes (``.npz``, ``.vti``), the masks, the sensing record, slice and
-curve images, the held-out views' figures, the final metrics, and the one summary line a run prints.
+curve images, the held-out views' figures and the final metrics (the line a run prints: :mod:`nerif.io.headline`).
 
 The writers take what a run computed (its :class:`nerif.results.Results`, its masks, its scene) and compute no
 score of their own; they call nothing of the solver's.
@@ -19,7 +19,7 @@ from nerif.export import atomic_write, to_uint8, write_npz, write_png, write_vti
 from nerif.metrics import temperature_std
 from nerif.io.plots import (curves_figure, heldout_figure, masks_figure, measured_figure, png_bytes,
                              profiles_figure, rig_figure, save_figure, sensing_figure, slice_figure)
-from nerif.units import VOLUMES, stage_key
+from nerif.units import VOLUMES
 
 # the files every run writes (held-out figures, masks and sensing pictures beside them where there are any)
 RESULTS = ("reconstruction.npz", "reconstruction.vti", "slices.png", "profiles.png", "curves.png", "metrics.json")
@@ -35,7 +35,7 @@ def write_masks(masks, scene, out_dir: Path, figures: bool = True) -> None:
         values = [scene.view_image(v, np.linalg.norm(eps[scene.view_slice(v)], axis=-1), np.nan)
                   for v in range(scene.n_views)]
         save_figure(masks_figure(values, list(masks.images), [c.name for c in scene.cameras],
-                                 "rad" if scene.ambient.temperature_known else "sigma", scene.cameras[0].binning),
+                                 scene.ambient.deflection_unit, scene.cameras[0].binning),
                     out_dir / "masks" / "masks2d.png")
     if masks.volume is not None:
         origin = [float(a[0]) for a in scene.box.axes()]
@@ -148,84 +148,10 @@ def write_figures(results, scene, out_dir: Path, history: list, losses, title: s
         atomic_write(out_dir / f"{name}.png", lambda tmp: Path(tmp).write_bytes(png))
         if show is not None:
             show(name, png)
-    save_figure(curves_figure(history, losses, images_from, "rad" if scene.ambient.temperature_known else "sigma"),
+    save_figure(curves_figure(history, losses, images_from, scene.ambient.deflection_unit),
                 out_dir / "curves.png")
     for view in results.heldout:
         cam = view.camera
         save_figure(heldout_figure(view.observed, view.predicted, unit=results.heldout_unit,
                                    title=f"held out: {cam.name}", block_px=cam.binning),
                     out_dir / "heldout" / f"{camera_file(cam.name)}.png")
-
-
-def temperature_words(m: dict) -> str:
-    """The summary line's temperatures: the peak (+- one standard deviation where estimated) and where it is, the
-    true peak and the peak's error where a truth is known, and the flame's volume."""
-    std = f" +- {m['T_std_at_peak_K']:.0f} K" if m.get("T_std_at_peak_K") is not None else " K"
-    if m.get("T_peak_interval_K") is not None:  # the peak's own interval (nerif.metrics.reported_intervals)
-        std = " K (2 std: {:.0f}-{:.0f})".format(*m["T_peak_interval_K"])
-    if m.get("T_peak_field_K") is not None and m.get("resolution_mm") is not None:
-        std = f"{std} read through {m['resolution_mm']:.2f} mm of resolution (the field's {m['T_peak_field_K']:.0f} K)"
-    where = m.get("T_peak_position_mm")
-    at = f" at ({', '.join(f'{c:.1f}' for c in where)}) mm" if isinstance(where, list) else ""
-    true = (f" (true {m['T_peak_true_K']:.0f} K, {m['T_peak_error_K']:+.0f} K)"
-            if m.get("T_peak_true_K") is not None else "")
-    volume = ""
-    if m.get("flame_volume_cm3") is not None and m.get("flame_volume_above_K") is not None:
-        spread = (" (2 std: {:.3g}-{:.3g})".format(*m["flame_volume_interval_cm3"])
-                  if m.get("flame_volume_interval_cm3") is not None else "")
-        volume = f", {m['flame_volume_cm3']:.3g} cm3{spread} above {m['flame_volume_above_K']:.0f} K" + (
-            f" (true {m['flame_volume_true_cm3']:.3g})" if m.get("flame_volume_true_cm3") is not None else "")
-    return f"peak T {m['T_peak_K']:.0f}{std}{at}{true}{volume}"
-
-
-def summary_line(m: dict, out_dir: Path, prefix: str = "") -> str:
-    """One line of the run's headline figures, each named as in ``metrics.json`` (after ``prefix``)."""
-    def known(k):
-        return m.get(k) is not None and np.isfinite(m[k])
-
-    parts = []
-    if known("temperature_rmse_K"):
-        flame = f" (flame {m['temperature_rmse_flame_K']:.1f} K)" if known("temperature_rmse_flame_K") else ""
-        parts.append(f"T RMSE {m['temperature_rmse_K']:.1f} K{flame}")
-    if known("T_peak_K"):
-        parts.append(temperature_words(m))
-    unit = "sigma" if "deflection_unit" in m else "rad"
-    scale = (" (its scale and the temperatures' set by the rig's distances to the background, which no image checks)"
-             if unit == "rad" and m.get("measurement") else "")  # measured from images: a lever arm the user gave
-    parts.append(f"deflection RMSE {m['deflection_rmse']:.3g} {unit}{scale}")
-    if known("heldout_deflection_rmse"):
-        def psnr(k: str) -> str:
-            return f"PSNR {m[k]:.1f} dB" if known(k) else "PSNR undefined (no deflection seen)"
-
-        held = [f"{100 * m['heldout_explained']:.0f} % of its displacements explained"] \
-            if known("heldout_explained") else []
-        held.append(f"deflection RMSE {m['heldout_deflection_rmse']:.3g} {unit}, {psnr('heldout_psnr_db')}")
-        if known("heldout_displacement_rmse_px"):
-            held.append(f"displacement RMSE {m['heldout_displacement_rmse_px']:.3g} px, "
-                        f"{psnr('heldout_displacement_psnr_db')}")
-        if known("heldout_photometric_rmse"):
-            ref = (f" (the flow's {100 * m['heldout_photometric_rmse_flow']:.2f} %, none "
-                   f"{100 * m['heldout_photometric_rmse_none']:.2f} %)" if known("heldout_photometric_rmse_flow") else "")
-            held.append(f"image residual {100 * m['heldout_photometric_rmse']:.2f} % of full range{ref}")
-        parts.append("held out: " + "; ".join(held))
-    flow_field, images_field = m.get(stage_key("flow")), m.get(stage_key("images"))
-    if flow_field and images_field:  # the held-out views chose between the flow's field and the images'
-        whose = "the images'" if m["data_term_kept"] == "images" else "the flow's"
-        if "heldout_image_misfit" in images_field and "heldout_image_misfit" in flow_field:
-            flow, images = (100 * f["heldout_image_misfit"] for f in (flow_field, images_field))
-            parts.append(f"kept {whose} field (held-out image residual: images {images:.3g}, flow {flow:.3g} % of "
-                         "full range)")
-        else:
-            flow, images = flow_field["heldout_misfit"], images_field["heldout_misfit"]
-            unit = "sigma" if "deflection_unit" in m else "px"
-            parts.append(f"kept {whose} field (held out: images {images:.3g}, flow {flow:.3g} {unit})")
-    elif m.get("data_term_kept"):  # a series: how often each was kept
-        parts.append(f"field kept: {m['data_term_kept']}")
-    if known("T_std_median_flame_K"):
-        parts.append(f"uncertainty in the flame {m['T_std_median_flame_K']:.0f} K median (1 std)")
-    parts += [f"WARNING: {w}" for w in m.get("warnings", [])]
-    resumed = m["wall_time_s"] > m["total_time_s"]  # training of earlier sessions counts, this process's time not
-    parts.append(f"{m['iterations']} it: {m['wall_time_s']:.0f} s training{' over every session' if resumed else ''} "
-                 f"({m['ms_per_iteration']:.1f} ms/it), {m['total_time_s']:.0f} s in all"
-                 f"{' this session' if resumed else ''}")
-    return "nerif: " + prefix + " | ".join(parts) + f" | {out_dir}"
