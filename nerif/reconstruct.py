@@ -25,7 +25,7 @@ from nerif.results import final_volumes, results
 from nerif.sensing.measurement import CAUSES
 from nerif.solvers import SOLVERS, Interrupted
 from nerif.solvers.base import stop_signals
-from nerif.solvers.uncertainty import UNCERTAINTY
+from nerif.solvers.uncertainty import UNCERTAINTY, Estimate
 from nerif.units import declare, metric_units, stage_key
 
 log = logging.getLogger(__name__)
@@ -170,9 +170,10 @@ def _start(solver, resume_setting, checkpoint: Path, start_from: Optional[Path])
         log.info("warm start from %s", start_from)
 
 
-def _train(solver, uncertainty, board: Board, tc, checkpoint: Path, resume_hint, threads) -> list[str]:
+def _train(solver, uncertainty, board: Board, tc, checkpoint: Path, resume_hint,
+           threads) -> tuple[list[str], Estimate]:
     """Training (checkpoints on the way, not at the end), then the uncertainty; returns the signals received during
-    the uncertainty (which end it, not the results)."""
+    the uncertainty (which end it, not the results) and what the uncertainty found."""
     try:
         solver.fit(checkpoint_every=tc.checkpoint_every, checkpoint_every_s=tc.checkpoint_every_s,
                    checkpoint=checkpoint, on_eval=board.on_eval, on_step=board.on_step, progress=tc.progress,
@@ -181,26 +182,25 @@ def _train(solver, uncertainty, board: Board, tc, checkpoint: Path, resume_hint,
             estimated = uncertainty(solver, stop=lambda: bool(received))
         if received:
             log.warning("%s while estimating the uncertainty: the results are written without it", received[0])
-        solver.added.update(estimated.get("volumes", {}))
-        solver.report.update(estimated.get("report", {}))
     except BaseException:
         board.close()
         raise
-    return received
+    return received, estimated
 
 
-def _write(solver, scene, out_dir: Path, board: Board, cfg: DictConfig, device: torch.device, rig_warnings: list[str],
-           records: WarningRecords, about: dict, times: dict, threads) -> dict:
-    """Every result and ``metrics.json`` (its ``warnings``: those given before, the rig's, the results', then every
+def _write(solver, estimate: Estimate, scene, out_dir: Path, board: Board, cfg: DictConfig, device: torch.device,
+           rig_warnings: list[str], records: WarningRecords, about: dict, times: dict, threads) -> dict:
+    """Every result of ``solver`` and what its uncertainty found (``estimate``), and ``metrics.json`` (its ``warnings``: those given before, the rig's, the results', then every
     one logged during the run, ``records``; ``times``: ``setup_time_s``, and ``t_start`` for the total); where the
     disk refuses them, one sentence saying what is there and what is not, the final state checkpointed where it still
     fits."""
     checkpoint = out_dir / "checkpoint.pt"
     try:
         try:
-            volumes = final_volumes(solver, scene)
+            volumes = final_volumes(solver, scene, estimate)
             write_volumes(volumes, scene, out_dir)  # first: what the run made is kept whatever comes after
-            found = results(solver, scene, volumes, flame_above_K=cfg.metrics.flame_above_K, figures=cfg.figures)
+            found = results(solver, scene, volumes, estimate, flame_above_K=cfg.metrics.flame_above_K,
+                            figures=cfg.figures)
             if cfg.figures:
                 label = " + ".join(str(v) for k, v in solver.labels.items() if k != "lam")
                 write_figures(found, scene, out_dir, solver.history, board.losses,
@@ -246,8 +246,8 @@ def _reconstruct(cfg: DictConfig, out_dir: Path, device: torch.device, records: 
     board = Board(out_dir, solver, scene, cfg.train.image_every)
     log.info("%s: %d views, %d rays; %s, device %s", cfg.data.name, scene.n_views, len(scene.dirs),
              ", ".join(f"{k} {v}" for k, v in solver.labels.items()), device)
-    received = _train(solver, uncertainty, board, cfg.train, checkpoint, resume_hint, threads)
-    metrics = _write(solver, scene, out_dir, board, cfg, device, rig_warnings, records, about,
+    received, estimate = _train(solver, uncertainty, board, cfg.train, checkpoint, resume_hint, threads)
+    metrics = _write(solver, estimate, scene, out_dir, board, cfg, device, rig_warnings, records, about,
                      {"setup_time_s": setup_s, "t_start": t_start}, threads)
     solver.checkpoint(checkpoint)  # after the results: on a nearly full disk, they take the room first
     print(summary_line(Headline.of(metrics, scene.ambient.deflection_unit), out_dir), flush=True)

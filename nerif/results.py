@@ -16,6 +16,7 @@ from nerif.data.diagnostics import UNBOUNDED_DEG, widest_gap_deg
 from nerif.metrics import (flame_share_region, reported_intervals, resolved_peak_figures, temperature_figures,
                            temperature_std, uncertainty_scores, within_intervals)
 from nerif.resolution import effective_resolution_mm, resolved_peak
+from nerif.solvers.uncertainty import Estimate
 from nerif.units import SHARE, SIGMA, declare
 
 log = logging.getLogger(__name__)
@@ -69,11 +70,12 @@ class Results:
     heldout_unit: str = "px"
 
 
-def final_volumes(solver, scene) -> dict:
-    """The finished solver's volumes (``sigma`` and what its uncertainty added), with the temperature, refractive
-    index, delta and the temperature's standard deviation where a temperature is known, and the truth."""
+def final_volumes(solver, scene, estimate: Estimate) -> dict:
+    """The finished solver's volumes (``sigma``) and those its uncertainty found (``estimate``), with the
+    temperature, refractive index, delta and the temperature's standard deviation where a temperature is known, and
+    the truth."""
     amb = scene.ambient
-    vols = dict(solver.volumes())
+    vols = {**solver.volumes(), **estimate.volumes}
     sigma = vols["sigma"]
     if amb.temperature_known:
         vols.update(T=amb.temperature_from_sigma(sigma), n=amb.n_from_sigma(sigma), delta=sigma * amb.delta_thre)
@@ -84,10 +86,10 @@ def final_volumes(solver, scene) -> dict:
     return vols
 
 
-def results(solver, scene, vols: dict, *, flame_above_K: float, figures: bool = True) -> Results:
+def results(solver, scene, vols: dict, estimate: Estimate, *, flame_above_K: float, figures: bool = True) -> Results:
     """Every result of a finished ``solver`` on ``scene`` with its volumes ``vols`` (:func:`final_volumes`; the
-    flame's volume: where T is above ``flame_above_K`` [K]); ``figures``: the held-out views' pictures kept for
-    drawing."""
+    flame's volume: where T is above ``flame_above_K`` [K]) and what its uncertainty found (``estimate``: its
+    report's figures); ``figures``: the held-out views' pictures kept for drawing."""
     final = dict(solver.history[-1]) if solver.history else solver.evaluate()
     final.pop("iteration", None)
     final.update(solver.evaluation.view_misfits(solver.predict))
@@ -105,6 +107,7 @@ def results(solver, scene, vols: dict, *, flame_above_K: float, figures: bool = 
             if said:
                 log.warning("%s", said)
     final.update(run_figures(solver, scene, vols["sigma"], failed))
+    final.update(estimate.report)
     final.update(peak_and_uncertainty(solver, scene, vols, flame_above_K, final.get("warnings", [])))
     if scene.sensing is not None:
         final.update(scene.sensing.report())

@@ -5,7 +5,7 @@ import pytest
 from nerif.configs import group
 from nerif.data import DATASETS
 from nerif.metrics import uncertainty_scores
-from nerif.solvers.uncertainty import UNCERTAINTY
+from nerif.solvers.uncertainty import UNCERTAINTY, Estimate
 from nerif.units import unit_of
 from tests.helpers import solver, tiny_config, trained_on_half_the_box
 
@@ -26,9 +26,9 @@ def test_where_no_ray_reaches_the_field_is_less_certain_and_the_result_is_unchan
     before = s.reconstruction()
     out = UNCERTAINTY.build({"name": "laplace", "batches": 16, "samples": 4})(s)
     np.testing.assert_array_equal(s.reconstruction(), before)
-    seen, std = out["volumes"]["views_seeing"], out["volumes"]["sigma_std"]
+    seen, std = out.volumes["views_seeing"], out.volumes["sigma_std"]
     assert np.median(std[seen == 0]) > 2 * np.median(std[seen == seen.max()])
-    report = out["report"]
+    report = out.report
     assert report["uncertainty"] == "laplace" and report["uncertainty_scale_from"] == "held-out views"
     assert not [k for k in report if unit_of(k) is None]  # every figure it reports has its unit in metrics.json
     truth = scene.ambient.sigma_from_temperature(scene.truth_T)
@@ -41,4 +41,4 @@ def test_a_stop_during_the_draws_returns_nothing():
     s = solver(cfg, scene)
     s.fit(checkpoint_every=10**9, progress=False)
     calls = []
-    assert UNCERTAINTY.build({"name": "laplace", "batches": 4})(s, stop=lambda: calls.append(1) or len(calls) > 3) == {}
+    assert UNCERTAINTY.build({"name": "laplace", "batches": 4})(s, stop=lambda: calls.append(1) or len(calls) > 3) == Estimate()

@@ -8,6 +8,7 @@ import pytest
 from nerif.metrics import temperature_std
 from nerif.physics import Ambient
 from nerif.results import Results, final_volumes, results, uncertainty_report
+from nerif.solvers.uncertainty import Estimate
 
 AMB = Ambient(T0=300.0, n0=1.00027, T_max=2000.0)
 
@@ -32,7 +33,7 @@ def test_the_results_of_a_trained_field_are_its_volumes_its_evaluation_and_its_h
     from tests.helpers import trained_on_half_the_box
 
     solver, scene = trained_on_half_the_box(40)
-    vols = final_volumes(solver, scene)
+    vols = final_volumes(solver, scene, Estimate())
     sigma = solver.reconstruction()
     np.testing.assert_array_equal(vols["sigma"], sigma)
     amb = scene.ambient  # air: n - 1 = T0 (n0 - 1) / T, delta = n / n0 - 1 = sigma delta_thre
@@ -40,7 +41,7 @@ def test_the_results_of_a_trained_field_are_its_volumes_its_evaluation_and_its_h
     np.testing.assert_allclose(vols["delta"], vols["n"] / amb.n0 - 1, rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(vols["delta"], sigma * amb.delta_thre, rtol=1e-12)
     np.testing.assert_array_equal(vols["T_true"], scene.truth_T)
-    found = results(solver, scene, vols, flame_above_K=1000.0, figures=True)
+    found = results(solver, scene, vols, Estimate(), flame_above_K=1000.0, figures=True)
     assert isinstance(found, Results) and found.volumes is vols
     m = found.metrics
     last = {k: v for k, v in solver.history[-1].items() if k != "iteration" and not k.startswith("heldout")}
@@ -51,7 +52,7 @@ def test_the_results_of_a_trained_field_are_its_volumes_its_evaluation_and_its_h
     assert [v.camera.name for v in found.heldout] == [c.name for c in scene.heldout.cameras]
     view = found.heldout[0]
     assert found.heldout_unit == "px" and view.observed.shape == view.predicted.shape and view.observed.shape[-1] == 2
-    assert results(solver, scene, vols, flame_above_K=1000.0, figures=False).heldout == []
+    assert results(solver, scene, vols, Estimate(), flame_above_K=1000.0, figures=False).heldout == []
 
 
 def test_a_rig_that_leaves_more_directions_unseen_than_seen_bounds_the_peak_by_the_prior_alone():

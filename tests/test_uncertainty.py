@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from nerif.metrics import ause, uncertainty_scores
-from nerif.solvers.uncertainty import UNCERTAINTY, calibration, left_out_views
+from nerif.solvers.uncertainty import UNCERTAINTY, Estimate, calibration, left_out_views
 from nerif.units import unit_of
 
 
@@ -155,11 +155,11 @@ def test_a_voxel_no_ray_reaches_is_less_certain_than_one_every_view_sees_and_the
     before = s.reconstruction()
     out = UNCERTAINTY.build({"name": "ensemble", "members": 2, "fraction": 0.5})(s)
     np.testing.assert_array_equal(s.reconstruction(), before)
-    seen, std = out["volumes"]["views_seeing"], out["volumes"]["sigma_std"]
+    seen, std = out.volumes["views_seeing"], out.volumes["sigma_std"]
     assert (seen == 0).any() and (seen == seen.max()).any()
     assert np.median(std[seen == 0]) > 10 * np.median(std[seen == seen.max()])
-    assert out["report"]["uncertainty_scale_from"] == "held-out views"
-    assert not [k for k in out["report"] if unit_of(k) is None]  # every figure it reports has its unit
+    assert out.report["uncertainty_scale_from"] == "held-out views"
+    assert not [k for k in out.report if unit_of(k) is None]  # every figure it reports has its unit
 
 
 def test_a_run_without_uncertainty_writes_none(tmp_path):
@@ -197,11 +197,11 @@ def test_the_default_estimates_an_ensemble_only_where_the_run_can_calibrate_one(
     auto.check(s)
     out = auto(s)
     ens = UNCERTAINTY.build({"name": "ensemble", **settings})(s)
-    assert out["report"]["uncertainty_scale_from"] == "held-out views"
-    np.testing.assert_allclose(out["volumes"]["sigma_std"], ens["volumes"]["sigma_std"], rtol=1e-4, atol=1e-7)
+    assert out.report["uncertainty_scale_from"] == "held-out views"
+    np.testing.assert_allclose(out.volumes["sigma_std"], ens.volumes["sigma_std"], rtol=1e-4, atol=1e-7)
     s.scene = replace(scene, heldout=None)
     with caplog.at_level(logging.INFO, logger="nerif.solvers.uncertainty"):
-        assert auto(s) == {}
+        assert auto(s) == Estimate()
     assert "the data hold no view out" in caplog.text and "no uncertainty estimated" in caplog.text
     s.scene = scene
     assert "cannot spare 9" in UNCERTAINTY.build({"name": "auto", "leave_out": 9}).without(s)

@@ -226,18 +226,12 @@ class IterativeSolver:
         encoder's finest cell for a neural field; it sets the run's resolution (:mod:`nerif.resolution`)."""
         return float(self.scene.box.voxel_mm)
 
-    @property
-    def added(self) -> dict[str, np.ndarray]:
-        """Volumes estimated about the result after training (an uncertainty: :mod:`nerif.solvers.uncertainty`),
-        shown with it by :meth:`volumes`."""
-        return self.__dict__.setdefault("_added", {})
-
     def volumes(self) -> dict[str, np.ndarray]:
         """Every volume on the probe grid the solver has to show, each (nx, ny, nz) in the unit of sigma unless its
-        name says otherwise: ``sigma`` (:meth:`reconstruction`) here, and what a solver adds (an uncertainty, a
-        count of views); :func:`nerif.results.final_volumes` takes them all, and the temperature of
-        ``sigma``."""
-        return {"sigma": self.reconstruction(), **self.added}
+        name says otherwise: ``sigma`` (:meth:`reconstruction`) here, and what a solver adds; with what its
+        uncertainty found (:class:`nerif.solvers.uncertainty.Estimate`), :func:`nerif.results.final_volumes` takes
+        them all, and the temperature of ``sigma``."""
+        return {"sigma": self.reconstruction()}
 
     def predict(self, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
         """Deflections of sigma (R, 3) of rays (R, 3) through the current reconstruction, in the unit of

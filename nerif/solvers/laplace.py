@@ -16,7 +16,7 @@ import time
 import torch
 
 from nerif.solvers.trained import why_not
-from nerif.solvers.uncertainty import UNCERTAINTY, calibrated_spread, heldout_fit
+from nerif.solvers.uncertainty import UNCERTAINTY, Estimate, calibrated_spread, heldout_fit
 from nerif.units import declare
 
 log = logging.getLogger(__name__)
@@ -60,7 +60,7 @@ class LaplaceApproximation:
             raise ValueError(f"uncertainty=laplace needs a trained field to draw from: {why}; use uncertainty=none, "
                              "or solver=nerif")
 
-    def __call__(self, solver, stop=None) -> dict:
+    def __call__(self, solver, stop=None) -> Estimate:
         """The uncertainty of ``solver``'s trained result (a :class:`~nerif.solvers.trained.TrainedField`), which is
         left as it was (the draws are its clone's); ``stop()`` true (a signal) ends it and returns
         nothing."""
@@ -71,7 +71,7 @@ class LaplaceApproximation:
         curvature = [torch.zeros_like(p) for p in params]
         for _ in range(self.batches):
             if stop is not None and stop():
-                return {}
+                return Estimate()
             # the iteration does not advance: an occupancy update due at it would run on every batch
             grads = torch.autograd.grad(draw.batch_loss(update_occupancy=False)[0]["loss"], params, allow_unused=True)
             for c, g in zip(curvature, grads):
@@ -87,7 +87,7 @@ class LaplaceApproximation:
         held = not why_not(solver, heldout=True)  # a view no field trained on, to calibrate by
         for _ in range(self.samples):
             if stop is not None and stop():
-                return {}
+                return Estimate()
             with torch.no_grad():
                 for p, mean, width in zip(params, trained, widths):
                     p.copy_(mean + width * torch.randn(p.shape, generator=draw.generator, device=p.device,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -28,6 +29,20 @@ declare(uncertainty_member_iterations="iterations", uncertainty_members="fields"
 UNCERTAINTY = Registry("uncertainty", package="nerif.solvers")
 
 
+@dataclass(frozen=True)
+class Estimate:
+    """What an uncertainty method found about a trained result, handed to :func:`nerif.results.results` beside it.
+
+    Attributes:
+        volumes: name -> (nx, ny, nz) on the probe grid: ``sigma_std`` [sigma], ``views_seeing`` [views]; empty
+            where none was estimated (``uncertainty=none``, or a signal ended it).
+        report: ``metrics.json``'s figures of the method (each unit declared in its module).
+    """
+
+    volumes: dict = field(default_factory=dict)
+    report: dict = field(default_factory=dict)
+
+
 @UNCERTAINTY.register("none")
 class NoUncertainty:
     """No uncertainty: the run as it was."""
@@ -35,8 +50,8 @@ class NoUncertainty:
     def check(self, solver) -> None:
         pass
 
-    def __call__(self, solver, stop=None) -> dict:
-        return {}
+    def __call__(self, solver, stop=None) -> Estimate:
+        return Estimate()
 
 
 def left_out_views(n_views: int, members: int, leave_out: int) -> list[list[int]]:
@@ -99,7 +114,7 @@ class ViewEnsemble:
         if why:
             raise ValueError(f"uncertainty.leave_out={self.leave_out}: {why}; leave out fewer")
 
-    def __call__(self, solver, stop=None) -> dict:
+    def __call__(self, solver, stop=None) -> Estimate:
         """The uncertainty of ``solver``'s trained result (a :class:`~nerif.solvers.trained.TrainedField`, left as it
         was: each member is its clone); ``stop()`` true (a signal) ends it between steps and
         returns nothing."""
@@ -113,7 +128,7 @@ class ViewEnsemble:
             member = solver.clone([v for v in range(scene.n_views) if v not in out], self.seed + k,
                                   iterations=iterations, lr_factor=self.lr_factor, perturb=self.perturb)
             if not member.train(stop):
-                return {}
+                return Estimate()
             fields.append(member.reconstruction())
             if held:
                 held_pred.append(heldout_fit(member))
@@ -138,16 +153,16 @@ class AutomaticUncertainty(ViewEnsemble):
     def check(self, solver) -> None:
         pass
 
-    def __call__(self, solver, stop=None) -> dict:
+    def __call__(self, solver, stop=None) -> Estimate:
         why = self.without(solver)
         if why:
             log.info("uncertainty=auto: %s: no uncertainty estimated", why)
-            return {}
+            return Estimate()
         return super().__call__(solver, stop)
 
 
 def calibrated_spread(solver, fields: list[np.ndarray], held_pred: list[torch.Tensor], report: dict,
-                      t0: float) -> dict:
+                      t0: float) -> Estimate:
     """What an uncertainty method returns from the fields it drew about ``solver``'s result: their spread per voxel
     (``fields``: K (nx, ny, nz) sigma), scaled by :func:`calibration` so that it explains the field's error on the
     held-out views (``held_pred``: K (R, 3) their predictions there; empty without held-out views: the spread as it
@@ -171,10 +186,10 @@ def calibrated_spread(solver, fields: list[np.ndarray], held_pred: list[torch.Te
     std = factor * spread
     a, b = solver.interval
     std[seeing == 0] = np.maximum(std[seeing == 0], (b - a) / 12 ** 0.5)  # no ray: only the prior's bounds
-    return {"volumes": {"sigma_std": std, "views_seeing": seeing.astype(np.float64)},
-            "report": {**report, "uncertainty_scale": float(factor), "uncertainty_scale_from": source,
-                       "uncertainty_time_s": time.perf_counter() - t0,
-                       "uncertainty_spread_median": float(np.median(spread))}}
+    return Estimate({"sigma_std": std, "views_seeing": seeing.astype(np.float64)},
+                    {**report, "uncertainty_scale": float(factor), "uncertainty_scale_from": source,
+                     "uncertainty_time_s": time.perf_counter() - t0,
+                     "uncertainty_spread_median": float(np.median(spread))})
 
 
 def heldout_fit(solver) -> torch.Tensor:
