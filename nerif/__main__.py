@@ -13,7 +13,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import OverrideParseException
 from omegaconf import DictConfig
 
-from nerif.configs import check_kinds, compose, config_dir, group_choices, unknown_override
+from nerif.configs import check_kinds, check_settings, compose, config_dir, group_choices, unknown_override
 from nerif.export import write_json
 from nerif.io.summary import FAILED
 
@@ -75,32 +75,47 @@ def stop(message: str) -> float:
     sys.exit(2)
 
 
+def interrupted(e: KeyboardInterrupt) -> None:
+    """The exit of a run a signal ended: where training had begun, the loop saved a checkpoint and said so in one
+    line (a Slurm requeue handed on); before it (the flow, the rendering) nothing was made to keep."""
+    from nerif.solvers import Interrupted
+
+    if not isinstance(e, Interrupted):
+        logging.getLogger("nerif").error("interrupted before training began: nothing to save")
+        sys.exit(130)
+    number = getattr(signal, e.signal_name)
+    launcher_handler = signal.getsignal(number)
+    if e.signal_name == "SIGUSR2" and callable(launcher_handler):  # submitit's: it requeues the job, which
+        launcher_handler(number, None)                            # resumes from this checkpoint
+    sys.exit(128 + int(number))
+
+
+def diverged(e: Exception) -> str:
+    """The one sentence of a run whose loss diverged (:class:`nerif.solvers.DivergenceError`), else ""."""
+    from nerif.solvers import DivergenceError
+
+    return str(e.args[0] if len(e.args) == 1 else e) if isinstance(e, DivergenceError) else ""
+
+
 @hydra.main(version_base=None, config_path=str(config_dir()), config_name="config")
 def main(cfg: DictConfig) -> float:
     try:
         check_overrides(cfg, HydraConfig.get().overrides.task)
-    except ValueError as e:  # said before torch and the rest are imported (seconds)
-        return stop(str(e))
-    from nerif.app import run, unexpected
-    from nerif.solvers import DivergenceError, Interrupted
+        check_settings(cfg)  # what the config alone tells, before the seconds of importing torch and the rest
+        from nerif.app import run
 
-    try:
         metrics = run(cfg, HydraConfig.get().runtime.output_dir, parallel_jobs())
-    except (ValueError, FileNotFoundError, DivergenceError) as e:  # bad input or a diverged run: one sentence
+    except (ValueError, FileNotFoundError) as e:  # bad input: one sentence
         return stop(str(e.args[0] if len(e.args) == 1 else e))  # an OSError's own: "[Errno 2] ...: 'path'"
-    except Interrupted as e:  # the loop saved a checkpoint and said so in one line
-        number = getattr(signal, e.signal_name)
-        launcher_handler = signal.getsignal(number)
-        if e.signal_name == "SIGUSR2" and callable(launcher_handler):  # submitit's: it requeues the job, which
-            launcher_handler(number, None)                            # resumes from this checkpoint
-        sys.exit(128 + int(number))
-    except KeyboardInterrupt:  # Ctrl-C before training (the flow, the rendering): nothing was made to keep
-        logging.getLogger("nerif").error("interrupted before training began: nothing to save")
-        sys.exit(130)
-    except Exception as e:  # anything else is one sentence too; the traceback with debug=true
-        if cfg.get("debug"):
+    except KeyboardInterrupt as e:
+        interrupted(e)
+    except Exception as e:  # a diverged run, and anything else, is one sentence too; the traceback with debug=true
+        said = diverged(e)
+        if not said and cfg.get("debug"):
             raise
-        return stop(unexpected(e, "debug=true"))
+        from nerif.app import unexpected
+
+        return stop(said or unexpected(e, "debug=true"))
     return metrics.get("temperature_rmse_K", metrics["deflection_rmse"])
 
 

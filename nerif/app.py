@@ -5,22 +5,20 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import logging
-import os
 import platform
 import time
 from pathlib import Path
 
 import torch
 from omegaconf import DictConfig
-from omegaconf.errors import OmegaConfBaseException
 
-from nerif.configs import check_complete, group
+from nerif.configs import check_settings, group
 from nerif.data import DATASETS
 from nerif.io.folders import check_writable, run_folder
 from nerif.memory import check_memory
 from nerif.reconstruct import WarningRecords, reconstruct, resuming
 from nerif.sequence import frames_of, run_sequence
-from nerif.solvers.base import SOLVERS, check_train
+from nerif.solvers.base import SOLVERS
 from nerif.threads import ThreadTuner, resolve_threads, usable_cores
 
 DEVICES = "auto, cpu, cuda or cuda:N"
@@ -90,17 +88,6 @@ def check_outside_capture(cfg: DictConfig, out_dir: Path) -> None:
                          "would be read as views by the next run; write the run elsewhere")
 
 
-def check_figures(cfg: DictConfig) -> None:
-    """``figures`` (set, or read from the environment's ``NERIF_FIGURES``) is true or false: else one sentence."""
-    try:
-        value = cfg.figures
-    except OmegaConfBaseException:  # NERIF_FIGURES not a value at all (e.g. '[1,')
-        value = os.environ.get("NERIF_FIGURES")
-    if not isinstance(value, bool):
-        raise ValueError(f"figures={value!r}: true (the results' pictures drawn) or false (the data files alone), "
-                         "as a setting or in the environment's NERIF_FIGURES")
-
-
 def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     """Reconstruct the configured scene into ``out_dir``, or every frame of a time series (``data.frames``;
     :func:`nerif.sequence.run_sequence`); returns the final metrics. ``parallel_jobs``: jobs of a multirun
@@ -108,9 +95,7 @@ def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     count under the machine's load, :class:`nerif.threads.ThreadTuner`)."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
-    check_figures(cfg)
-    check_complete(cfg)
-    check_train(group(cfg, "train"), cfg.seed)
+    check_settings(cfg)
     device = resolve_device(cfg.device)
     check_memory(allocations(cfg), device)
     with WarningRecords() as early:  # what the log warns of before the data is read goes to metrics.json too

@@ -7,10 +7,13 @@ them from any folder; a source checkout or an editable install reads the reposit
 from __future__ import annotations
 
 import copy
+import math
+import os
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Mapping, Optional, Sequence
 
 from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -205,3 +208,50 @@ def unknown_override(args: Sequence[str]) -> Optional[str]:
                 return f"{key}: not a setting nerif knows{hint}"
             node, path = None if OmegaConf.is_missing(node, part) else node[part], path + [part]  # ???: a leaf
     return None
+
+
+def _number(v, whole: bool = False) -> bool:
+    ok = isinstance(v, int) if whole else isinstance(v, (int, float))
+    return ok and not isinstance(v, bool) and math.isfinite(v)
+
+
+def check_train(train: Mapping, seed) -> None:
+    """One sentence, naming the key, for a ``train`` setting no run can take (checked before any data are made)."""
+    def key(name: str, what: str, ok: bool) -> None:
+        if not ok:
+            raise ValueError(f"train.{name}={train[name]!r}: {what}")
+
+    for name in ("iterations", "eval_every", "checkpoint_every", "image_every", "rays_per_batch", "stop_patience"):
+        key(name, "a whole number of at least 1", _number(train[name], whole=True) and train[name] >= 1)
+    key("init_iterations", "a whole number of at least 0", _number(train["init_iterations"], True) and train["init_iterations"] >= 0)
+    key("lr", "the peak learning rate, a positive number", _number(train["lr"]) and train["lr"] > 0)
+    key("lr_min", f"the learning rate's floor, within [0, train.lr = {train['lr']}]",
+        _number(train["lr_min"]) and 0 <= train["lr_min"] <= (train["lr"] if _number(train["lr"]) else 0))
+    betas = train["betas"]
+    key("betas", "Adam's two decay rates, each within [0, 1)", isinstance(betas, (list, tuple)) and len(betas) == 2
+        and all(_number(b) and 0 <= b < 1 for b in betas))
+    key("eps", "Adam's denominator floor, a positive number", _number(train["eps"]) and train["eps"] > 0)
+    s = train["checkpoint_every_s"]
+    key("checkpoint_every_s", "seconds between checkpoints, a positive number or null", s is None or (_number(s) and s > 0))
+    if not _number(seed, whole=True):
+        raise ValueError(f"seed={seed!r}: a whole number")
+
+
+def check_figures(cfg: DictConfig) -> None:
+    """``figures`` (set, or read from the environment's ``NERIF_FIGURES``) is true or false: else one sentence."""
+    try:
+        value = cfg.figures
+    except OmegaConfBaseException:  # NERIF_FIGURES not a value at all (e.g. '[1,')
+        value = os.environ.get("NERIF_FIGURES")
+    if not isinstance(value, bool):
+        raise ValueError(f"figures={value!r}: true (the results' pictures drawn) or false (the data files alone), "
+                         "as a setting or in the environment's NERIF_FIGURES")
+
+
+def check_settings(cfg: DictConfig) -> None:
+    """One sentence for a setting no run can take, read from the config alone (no torch, no data): ``figures``,
+    a required value left unset or a key no block takes (:func:`check_complete`), the ``train`` block and the
+    seed (:func:`check_train`). The command line checks them before the seconds of importing torch."""
+    check_figures(cfg)
+    check_complete(cfg)
+    check_train(group(cfg, "train"), cfg.seed)

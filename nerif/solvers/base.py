@@ -38,33 +38,6 @@ SOLVERS = Registry("solver", package="nerif.solvers")
 _COUNTERS = ("iteration", "history", "train_seconds", "step_times")
 
 
-def _number(v, whole: bool = False) -> bool:
-    ok = isinstance(v, int) if whole else isinstance(v, (int, float))
-    return ok and not isinstance(v, bool) and np.isfinite(v)
-
-
-def check_train(train: Mapping, seed) -> None:
-    """One sentence, naming the key, for a ``train`` setting no run can take (checked before any data are made)."""
-    def key(name: str, what: str, ok: bool) -> None:
-        if not ok:
-            raise ValueError(f"train.{name}={train[name]!r}: {what}")
-
-    for name in ("iterations", "eval_every", "checkpoint_every", "image_every", "rays_per_batch", "stop_patience"):
-        key(name, "a whole number of at least 1", _number(train[name], whole=True) and train[name] >= 1)
-    key("init_iterations", "a whole number of at least 0", _number(train["init_iterations"], True) and train["init_iterations"] >= 0)
-    key("lr", "the peak learning rate, a positive number", _number(train["lr"]) and train["lr"] > 0)
-    key("lr_min", f"the learning rate's floor, within [0, train.lr = {train['lr']}]",
-        _number(train["lr_min"]) and 0 <= train["lr_min"] <= (train["lr"] if _number(train["lr"]) else 0))
-    betas = train["betas"]
-    key("betas", "Adam's two decay rates, each within [0, 1)", isinstance(betas, (list, tuple)) and len(betas) == 2
-        and all(_number(b) and 0 <= b < 1 for b in betas))
-    key("eps", "Adam's denominator floor, a positive number", _number(train["eps"]) and train["eps"] > 0)
-    s = train["checkpoint_every_s"]
-    key("checkpoint_every_s", "seconds between checkpoints, a positive number or null", s is None or (_number(s) and s > 0))
-    if not _number(seed, whole=True):
-        raise ValueError(f"seed={seed!r}: a whole number")
-
-
 def _same(a, b) -> bool:
     """Fingerprint entries equal, numbers to a relative 1e-3."""
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
