@@ -27,7 +27,8 @@ def config_dir() -> Path:
                             "holds config.yaml (reinstall nerif)")
 
 
-_COMPOSED: dict = {}  # (config name, overrides, the config files' sizes and times) -> its config
+_COMPOSED: dict = {}  # (config name, overrides) -> its config, composed from the config files as _FILES saw them
+_FILES: list = [None]  # the config files' paths, sizes and times when _COMPOSED was filled
 
 
 def compose(overrides: Sequence[str] = (), config_name: str = "config") -> DictConfig:
@@ -40,15 +41,21 @@ def compose(overrides: Sequence[str] = (), config_name: str = "config") -> DictC
     from hydra.core.global_hydra import GlobalHydra
 
     root = config_dir()
-    key = (config_name, tuple(overrides), tuple((str(p), p.stat().st_mtime_ns, p.stat().st_size)
-                                                for p in sorted(root.rglob("*.yaml"))))
-    if key not in _COMPOSED or any("searchpath" in o for o in overrides):
-        if GlobalHydra.instance().is_initialized():  # inside a run: Hydra's own search path, the same folder
-            _COMPOSED[key] = hydra_compose(config_name, overrides=list(overrides))
-        else:
-            with initialize_config_dir(config_dir=str(root), version_base=None):
-                _COMPOSED[key] = hydra_compose(config_name, overrides=list(overrides))
-    return copy.deepcopy(_COMPOSED[key])
+    files = [(str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in sorted(root.rglob("*.yaml"))]
+    if files != _FILES[0]:  # a config file changed (or another folder): nothing composed before holds
+        _COMPOSED.clear()
+        _FILES[0] = files
+    key = (config_name, tuple(overrides))
+    if key in _COMPOSED:
+        return copy.deepcopy(_COMPOSED[key])
+    if GlobalHydra.instance().is_initialized():  # inside a run: Hydra's own search path, the same folder
+        cfg = hydra_compose(config_name, overrides=list(overrides))
+    else:
+        with initialize_config_dir(config_dir=str(root), version_base=None):
+            cfg = hydra_compose(config_name, overrides=list(overrides))
+    if not any("searchpath" in o for o in overrides):
+        _COMPOSED[key] = copy.deepcopy(cfg)
+    return cfg
 
 
 def group(cfg: DictConfig, key: str) -> dict:
@@ -223,7 +230,8 @@ def check_train(train: Mapping, seed) -> None:
 
     for name in ("iterations", "eval_every", "checkpoint_every", "image_every", "rays_per_batch", "stop_patience"):
         key(name, "a whole number of at least 1", _number(train[name], whole=True) and train[name] >= 1)
-    key("init_iterations", "a whole number of at least 0", _number(train["init_iterations"], True) and train["init_iterations"] >= 0)
+    key("init_iterations", "a whole number of at least 0",
+        _number(train["init_iterations"], True) and train["init_iterations"] >= 0)
     key("lr", "the peak learning rate, a positive number", _number(train["lr"]) and train["lr"] > 0)
     key("lr_min", f"the learning rate's floor, within [0, train.lr = {train['lr']}]",
         _number(train["lr_min"]) and 0 <= train["lr_min"] <= (train["lr"] if _number(train["lr"]) else 0))
@@ -232,7 +240,8 @@ def check_train(train: Mapping, seed) -> None:
         and all(_number(b) and 0 <= b < 1 for b in betas))
     key("eps", "Adam's denominator floor, a positive number", _number(train["eps"]) and train["eps"] > 0)
     s = train["checkpoint_every_s"]
-    key("checkpoint_every_s", "seconds between checkpoints, a positive number or null", s is None or (_number(s) and s > 0))
+    key("checkpoint_every_s", "seconds between checkpoints, a positive number or null",
+        s is None or (_number(s) and s > 0))
     if not _number(seed, whole=True):
         raise ValueError(f"seed={seed!r}: a whole number")
 

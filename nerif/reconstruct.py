@@ -190,10 +190,10 @@ def _train(solver, uncertainty, board: Board, tc, checkpoint: Path, resume_hint,
 
 def _write(solver, estimate: Estimate, scene, out_dir: Path, board: Board, cfg: DictConfig, device: torch.device,
            rig_warnings: list[str], records: WarningRecords, about: dict, times: dict, threads) -> dict:
-    """Every result of ``solver`` and what its uncertainty found (``estimate``), and ``metrics.json`` (its ``warnings``: those given before, the rig's, the results', then every
-    one logged during the run, ``records``; ``times``: ``setup_time_s``, and ``t_start`` for the total); where the
-    disk refuses them, one sentence saying what is there and what is not, the final state checkpointed where it still
-    fits."""
+    """Every result of ``solver`` and what its uncertainty found (``estimate``), and ``metrics.json`` (its
+    ``warnings``: those given before, the rig's, the results', then every one logged during the run, ``records``;
+    ``times``: ``setup_time_s``, and ``t_start`` for the total); where the disk refuses them, one sentence saying what
+    is there and what is not, the final state checkpointed where it still fits."""
     checkpoint = out_dir / "checkpoint.pt"
     try:
         try:

@@ -328,7 +328,8 @@ def test_a_bug_is_one_sentence_and_its_traceback_is_there_with_debug(tmp_path):
     def call(*extra):
         code = ("import sys, nerif.__main__ as m, nerif.app\n"
                 "def broken(*args):\n    return {}['missing']\n"
-                f"nerif.app.run = broken\nsys.argv = ['nerif', 'device=cpu', 'hydra.run.dir={tmp_path}', *{list(extra)!r}]\n"
+                "nerif.app.run = broken\n"
+                f"sys.argv = ['nerif', 'device=cpu', 'hydra.run.dir={tmp_path}', *{list(extra)!r}]\n"
                 "m.main()\n")
         return subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
 

@@ -62,7 +62,8 @@ def test_the_share_of_the_held_out_displacements_explained_falls_with_the_fit_an
 def test_the_deflections_unit_is_the_ambients_and_the_stage_choice_is_typed():
     """The unit comes from the run's ambient gas (sigma where no temperature is inferred), not from which keys the
     metrics hold; the held-out views' choice between the flow's field and the images' is read into one record."""
-    assert Ambient(296.15, 1.000277, 2000.0).deflection_unit == "rad" and Ambient(296.15, 1.000277, None).deflection_unit == "sigma"
+    assert Ambient(296.15, 1.000277, 2000.0).deflection_unit == "rad"
+    assert Ambient(296.15, 1.000277, None).deflection_unit == "sigma"
     m = {"deflection_rmse": 0.01, "heldout_deflection_rmse": 0.02, "heldout_psnr_db": 20.0, "iterations": 10,
          "wall_time_s": 1.0, "total_time_s": 2.0, "ms_per_iteration": 100.0, "data_term_kept": "flow",
          stage_key("flow"): {"heldout_misfit": 0.11}, stage_key("images"): {"heldout_misfit": 0.12}}
