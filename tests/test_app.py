@@ -253,15 +253,15 @@ def test_a_realistic_run_writes_its_images_and_displacement_error(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_default_scene_is_within_the_target_error_at_a_quarter_of_its_iterations(tmp_path):
-    """`python -m nerif` as a new user runs it (hash + discrete on Phantom 5), a quarter as long: already under 18 K
-    temperature RMSE (13.2 K measured; the whole run's 8.2 K is `benchmarks/same_figures.py`'s default scene, the
-    README's figure). The whole run took 85 s of the suite's 6 min 41 s."""
-    r = nerif_here("train.progress=false", "train.iterations=300", f"hydra.run.dir={tmp_path}")
+def test_the_default_scene_is_within_the_target_error_at_a_sixth_of_its_iterations(tmp_path):
+    """`python -m nerif` as a new user runs it (hash + discrete on Phantom 5), a sixth as long: already under 24 K
+    temperature RMSE (18.3 K measured; 25.4 K at an eighth, 13.2 K at a quarter; the whole run's 8.2 K is
+    `benchmarks/same_figures.py`'s default scene, the README's figure)."""
+    r = nerif_here("train.progress=false", "train.iterations=200", f"hydra.run.dir={tmp_path}")
     assert r.returncode == 0, r.stderr[-2000:]
     m = json.loads((tmp_path / "metrics.json").read_text())
-    assert m["encoder"] == "hash" and m["grad"] == "discrete" and m["iterations"] == 300
-    assert m["temperature_rmse_K"] < 18.0, m["temperature_rmse_K"]
+    assert m["encoder"] == "hash" and m["grad"] == "discrete" and m["iterations"] == 200
+    assert m["temperature_rmse_K"] < 24.0, m["temperature_rmse_K"]
 
 
 @pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130), (signal.SIGUSR2, 140)])
@@ -278,7 +278,7 @@ def test_a_signal_saves_a_checkpoint_says_so_in_one_line_and_the_run_resumes(tmp
     deadline = time.monotonic() + 300
     while not (tmp_path / "tensorboard").is_dir() and time.monotonic() < deadline:  # training has started
         time.sleep(0.2)
-    time.sleep(2.0)
+    time.sleep(1.0)
     p.send_signal(signum)
     out = p.communicate(timeout=120)[0]
     assert p.returncode == code, out
@@ -322,21 +322,19 @@ def test_help_says_what_nerif_does_and_lists_the_groups():
     assert r.stdout.count("python -m nerif") >= 3
 
 
-def test_a_bug_is_one_sentence_and_its_traceback_is_there_with_debug(tmp_path):
+def test_a_bug_is_one_sentence_and_its_traceback_is_there_with_debug(tmp_path, monkeypatch):
     """Issue 38: any exception becomes one sentence naming it (OpenCV's, torch's and a TypeError from a value of
     the wrong kind reached the user raw); ``debug=true`` shows the traceback."""
-    def call(*extra):
-        code = ("import sys, nerif.__main__ as m, nerif.app\n"
-                "def broken(*args):\n    return {}['missing']\n"
-                "nerif.app.run = broken\n"
-                f"sys.argv = ['nerif', 'device=cpu', 'hydra.run.dir={tmp_path}', *{list(extra)!r}]\n"
-                "m.main()\n")
-        return subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    import nerif.app
 
-    r = call()
+    def broken(*args):
+        return {}["missing"]
+
+    monkeypatch.setattr(nerif.app, "run", broken)
+    r = nerif_here("device=cpu", f"hydra.run.dir={tmp_path}")
     assert r.returncode == 2 and "Traceback" not in r.stderr + r.stdout
     assert "nerif stopped on KeyError: 'missing'" in r.stdout + r.stderr and "debug=true" in r.stdout + r.stderr
-    r = call("debug=true")
+    r = nerif_here("device=cpu", f"hydra.run.dir={tmp_path}", "debug=true")
     assert r.returncode != 0
     assert "Traceback" in r.stderr and "KeyError: 'missing'" in r.stderr and "in broken" in r.stderr
 
