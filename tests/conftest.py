@@ -33,3 +33,19 @@ def _figures(request, monkeypatch):
 @pytest.fixture(autouse=True)
 def _seed():
     torch.manual_seed(0)
+
+
+@pytest.fixture(scope="session")
+def written(tmp_path_factory):
+    """(folder, scene, config): the 7-view tiny scene (:data:`tests.helpers.SMALL`) written as a capture folder,
+    once a test process for every module that reads it (none may change it)."""
+    from omegaconf import OmegaConf
+
+    from nerif.data import DATASETS
+    from nerif.write_capture import write_capture
+    from tests.helpers import SMALL, tiny_config
+
+    cfg = tiny_config(*SMALL)
+    scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device="cpu")
+    root = write_capture(scene, tmp_path_factory.mktemp("capture"))
+    return root, scene, cfg

@@ -20,6 +20,9 @@ TINY = ["device=cpu", "phantom=gaussian_blob", "phantom.shape=[16,16,16]", "phan
         "train.checkpoint_every=10", "train.progress=false", "data.cache_dir=null", "data.render_supersample=1",
         "field.finest_resolution=32", "field.log2_table_size=12",
         "uncertainty=none"]  # the default (auto) trains members wherever a view is held out: tested on its own
+# a capture of 7 views through the realistic chain (the `written` fixture of tests/conftest.py)
+SMALL = ["rig.width_px=240", "rig.height_px=320", "rig.binning=8", "phantom.shape=[16,16,16]", "phantom.voxel_mm=2.0",
+         "phantom.width_mm=6.0", "data.sensing=realistic", "data.sensor.aperture_rays=8", "rig.n_cameras=7"]
 
 
 def tiny_config(*overrides, synthetic: bool = True):

@@ -9,7 +9,7 @@ import pytest
 import torch
 import yaml
 
-from tests.helpers import tiny_config
+from tests.helpers import SMALL, tiny_config
 from nerif.app import run
 from nerif.data import DATASETS
 from nerif.data.capture import capture
@@ -18,17 +18,7 @@ from nerif.data.rig_file import RIG_FILE, read_rig
 from nerif.write_capture import write_capture
 from omegaconf import OmegaConf
 
-SMALL = ["rig.width_px=240", "rig.height_px=320", "rig.binning=8", "phantom.shape=[16,16,16]", "phantom.voxel_mm=2.0",
-         "phantom.width_mm=6.0", "data.sensing=realistic", "data.sensor.aperture_rays=8", "rig.n_cameras=7"]
 FLOW = {"name": "farneback"}
-
-
-@pytest.fixture(scope="module")
-def written(tmp_path_factory):
-    cfg = tiny_config(*SMALL)
-    scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device="cpu")
-    root = write_capture(scene, tmp_path_factory.mktemp("capture"))
-    return root, scene, cfg
 
 
 def test_capture_reads_back_the_scene(written):

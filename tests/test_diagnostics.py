@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from nerif.data.capture import capture
-from tests.test_capture import FLOW, _read, _swap, _variant, _write, written  # noqa: F401 (a fixture)
+from tests.test_capture import FLOW, _read, _swap, _variant, _write
 
 
 @pytest.mark.parametrize("edit, reason", [

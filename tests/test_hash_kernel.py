@@ -84,7 +84,7 @@ def test_training_steps_match(backend):
     runs = []
     for kernel in ("torch", backend):
         cfg = tiny_config("encoder.kernel=" + kernel, "mask=3d", "sampler=uniform", "field.hash_levels=2",
-                          "train.rays_per_batch=16")
+                          "train.rays_per_batch=8", "sampler.samples_per_ray=8")
         scene = DATASETS.build(group(cfg, "data"))
         torch.manual_seed(0)
         s = solver(cfg, scene, MASKS.build(group(cfg, "mask"), scene=scene))
