@@ -36,8 +36,12 @@ def multirun(tmp_path, *overrides, here: bool = True):
 @pytest.mark.slow
 @pytest.mark.figures
 def test_a_run_writes_every_output(tmp_path):
+    """A run through realistic sensing (images rendered, measured by the flow, its deflections fitted): its data
+    files, pictures, the sensing's images and figures and its displacement error, TensorBoard's curves, and a resume
+    from its checkpoint (the images' stage with its figures: the capture's held-out run in test_capture)."""
     out = tmp_path / "run"
-    r = nerif_here(*TINY, f"hydra.run.dir={out}")
+    r = nerif_here(*TINY, "data.sensing=realistic", "data.sensor.image_binning=8", "data.sensor.aperture_rays=8",
+                   "data.sensor.noise_variance=1e-4", "data_term=flow", f"hydra.run.dir={out}")
     assert r.returncode == 0, r.stderr[-2000:]
     assert "nerif: T RMSE" in r.stdout and str(out) in r.stdout
     m = json.loads((out / "metrics.json").read_text())
@@ -52,6 +56,14 @@ def test_a_run_writes_every_output(tmp_path):
         assert (out / f).is_file(), f
     assert {k for k, u in m["units"].items() if u == "?"} == set() and m["units"]["temperature_rmse_K"] == "K"
     assert m["T_peak_true_K"] == pytest.approx(float(z["T_true"].max())) and m["T_peak_field_K"] == float(z["T"].max())
+    # the realistic sensing's images (data, 8-bit as a camera saves them) and figures, and its displacement error
+    assert 0 < m["displacement_rmse_px"] < 0.1 and m["circle_of_confusion_px"] > 1
+    for v in range(6):
+        for stem in ("reference_view", "distorted_view", "view"):
+            assert (out / "sensing" / f"{stem}{v:02d}.png").stat().st_size > 1000
+    import cv2
+    ref = cv2.imread(str(out / "sensing" / "reference_view00.png"), cv2.IMREAD_UNCHANGED)
+    assert ref.shape == (160, 90) and ref.dtype == np.uint8 and ref.std() > 30
     # issue 66: the reported peak is the field's read through the run's resolution, never colder than the field's
     assert m["T_peak_K"] >= m["T_peak_field_K"] and m["resolution_mm"] > 0
     assert m["T_peak_error_K"] == pytest.approx(m["T_peak_K"] - m["T_peak_true_K"])
@@ -66,7 +78,9 @@ def test_a_run_writes_every_output(tmp_path):
         assert tag in tags["scalars"], tag
     assert {"slices", "profiles"} <= set(tags["images"]), tags["images"]
     # resume to 30 iterations from the checkpoint
-    r2 = nerif_here(*TINY, "train.iterations=30", f"train.resume={out / 'checkpoint.pt'}", "figures=false",
+    r2 = nerif_here(*TINY, "data.sensing=realistic", "data.sensor.image_binning=8", "data.sensor.aperture_rays=8",
+                    "data.sensor.noise_variance=1e-4", "data_term=flow", "train.iterations=30",
+                    f"train.resume={out / 'checkpoint.pt'}", "figures=false",
                     f"hydra.run.dir={tmp_path / 'more'}")
     assert r2.returncode == 0, r2.stderr[-2000:]
     assert json.loads((tmp_path / "more" / "metrics.json").read_text())["iterations"] == 30
@@ -233,23 +247,6 @@ def test_an_unwritable_output_folder_is_one_sentence_before_any_work(tmp_path, m
     assert r.returncode == 2
     assert f"the output folder {folder} cannot be written (Not a directory); choose another with {key}=" in r.stderr
     assert "Traceback" not in r.stderr + r.stdout
-
-
-@pytest.mark.slow
-@pytest.mark.figures
-def test_a_realistic_run_writes_its_images_and_displacement_error(tmp_path):
-    r = nerif_here(*TINY, "data.sensing=realistic", "data.sensor.image_binning=8", "data.sensor.aperture_rays=8",
-                   "data.sensor.noise_variance=1e-4", f"hydra.run.dir={tmp_path}")
-    assert r.returncode == 0, r.stderr[-2000:]
-    m = json.loads((tmp_path / "metrics.json").read_text())
-    assert 0 < m["displacement_rmse_px"] < 0.1 and m["circle_of_confusion_px"] > 1
-    assert {k for k, u in m["units"].items() if u == "?"} == set()
-    for v in range(6):
-        for stem in ("reference_view", "distorted_view", "view"):
-            assert (tmp_path / "sensing" / f"{stem}{v:02d}.png").stat().st_size > 1000
-    import cv2
-    ref = cv2.imread(str(tmp_path / "sensing" / "reference_view00.png"), cv2.IMREAD_UNCHANGED)
-    assert ref.shape == (160, 90) and ref.dtype == np.uint8 and ref.std() > 30
 
 
 @pytest.mark.slow
