@@ -27,15 +27,31 @@ def config_dir() -> Path:
                             "holds config.yaml (reinstall nerif)")
 
 
-_COMPOSED: dict = {}  # (config name, overrides) -> its config, composed from the config files as _FILES saw them
+_COMPOSED: dict = {}  # (config name, overrides, folders) -> its config, from the config files as _FILES saw them
 _FILES: list = [None]  # the config files' paths, sizes and times when _COMPOSED was filled
+
+
+def _folders(root: Path) -> Optional[tuple]:
+    """The folders of config files a compose reads now, as a cache key: this package's alone (a caller that
+    initialised Hydra elsewhere composes from its own folders), or None where Hydra also searches a folder of files
+    this module does not watch (another ``initialize_config_dir``, a run's ``hydra.searchpath``): not cached."""
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.hydra_config import HydraConfig
+
+    hydra = GlobalHydra.instance()
+    if not hydra.is_initialized():
+        return (str(root),)
+    files = tuple(s.path for s in hydra.config_loader().get_sources() if s.scheme() == "file")
+    searched = HydraConfig.initialized() and bool(HydraConfig.get().searchpath)
+    return files if files == (str(root),) and not searched else None
 
 
 def compose(overrides: Sequence[str] = (), config_name: str = "config") -> DictConfig:
     """The config ``python -m nerif OVERRIDES`` would run with (without Hydra's run folder): a copy of it, composed
     once a process for the same overrides while no config file changes (composing reads every yaml: 0.2-0.4 s, and
-    a run checks its settings against the config of its group choices twice). Overrides that add a folder to
-    Hydra's search path are composed each time (its files are not watched)."""
+    a run checks its settings against the config of its group choices twice). Inside an initialised Hydra (a run),
+    from its search path; composed each time where that, or an override, adds a folder whose files are not
+    watched."""
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
@@ -45,15 +61,16 @@ def compose(overrides: Sequence[str] = (), config_name: str = "config") -> DictC
     if files != _FILES[0]:  # a config file changed (or another folder): nothing composed before holds
         _COMPOSED.clear()
         _FILES[0] = files
-    key = (config_name, tuple(overrides))
-    if key in _COMPOSED:
+    folders = _folders(root)
+    key = (config_name, tuple(overrides), folders)
+    if folders is not None and key in _COMPOSED:
         return copy.deepcopy(_COMPOSED[key])
-    if GlobalHydra.instance().is_initialized():  # inside a run: Hydra's own search path, the same folder
+    if GlobalHydra.instance().is_initialized():  # inside a run: Hydra's own search path
         cfg = hydra_compose(config_name, overrides=list(overrides))
     else:
         with initialize_config_dir(config_dir=str(root), version_base=None):
             cfg = hydra_compose(config_name, overrides=list(overrides))
-    if not any("searchpath" in o for o in overrides):
+    if folders is not None and not any("searchpath" in o for o in overrides):
         _COMPOSED[key] = copy.deepcopy(cfg)
     return cfg
 

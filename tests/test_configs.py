@@ -54,6 +54,24 @@ def test_a_config_is_composed_once_and_again_when_a_file_changes(tmp_path, monke
     assert compose(["encoder=hash"]).train.iterations == 1300
 
 
+def test_a_config_composed_inside_another_hydra_folder_is_that_folders_not_the_kept_one(tmp_path):
+    """A caller that initialised Hydra on its own copy of the configs (or a run with ``hydra.searchpath``) composes
+    from those files, whose changes compose() does not watch: never the config it kept from nerif's own folder."""
+    import shutil
+
+    from hydra import initialize_config_dir
+
+    ours = compose(["encoder=hash"]).train.iterations
+    other = tmp_path / "conf"
+    shutil.copytree(config_dir(), other)
+    text = (other / "config.yaml").read_text()
+    (other / "config.yaml").write_text(text.replace(f"iterations: {ours} ", f"iterations: {ours + 7} ", 1))
+    for _ in range(2):  # and again: not kept from the first either (an edit of that folder would go unseen)
+        with initialize_config_dir(config_dir=str(other), version_base=None):
+            assert compose(["encoder=hash"]).train.iterations == ours + 7
+    assert compose(["encoder=hash"]).train.iterations == ours
+
+
 def test_every_config_group_of_the_registries_has_its_yaml():
     assert len(OPTIONS) >= 20
     for g, reg in REGISTRIES.items():
