@@ -41,7 +41,8 @@ def time_once(tree: Path, name: str, size: tuple[int, int]) -> dict:
     done = subprocess.run([sys.executable, "-c", TIMER, name, *map(str, size)], cwd=tree, env=env,
                           capture_output=True, text=True)
     if done.returncode:
-        raise SystemExit(f"{tree}: {name} at {size} failed: {done.stderr.strip().splitlines()[-1]}")
+        said = done.stderr.strip().splitlines() or [f"exit status {done.returncode}"]
+        raise SystemExit(f"{tree}: {name} at {size} failed: {said[-1]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 

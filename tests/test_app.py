@@ -40,8 +40,9 @@ def test_a_run_writes_every_output(tmp_path):
     files, pictures, the sensing's images and figures and its displacement error, TensorBoard's curves, and a resume
     from its checkpoint (the images' stage with its figures: the capture's held-out run in test_capture)."""
     out = tmp_path / "run"
-    r = nerif_here(*TINY, "data.sensing=realistic", "data.sensor.image_binning=8", "data.sensor.aperture_rays=8",
-                   "data.sensor.noise_variance=1e-4", "data_term=flow", f"hydra.run.dir={out}")
+    realistic = ("data.sensing=realistic", "data.sensor.image_binning=8", "data.sensor.aperture_rays=8",
+                 "data.sensor.noise_variance=1e-4", "data_term=flow")
+    r = nerif_here(*TINY, *realistic, f"hydra.run.dir={out}")
     assert r.returncode == 0, r.stderr[-2000:]
     assert "nerif: T RMSE" in r.stdout and str(out) in r.stdout
     m = json.loads((out / "metrics.json").read_text())
@@ -78,9 +79,7 @@ def test_a_run_writes_every_output(tmp_path):
         assert tag in tags["scalars"], tag
     assert {"slices", "profiles"} <= set(tags["images"]), tags["images"]
     # resume to 30 iterations from the checkpoint
-    r2 = nerif_here(*TINY, "data.sensing=realistic", "data.sensor.image_binning=8", "data.sensor.aperture_rays=8",
-                    "data.sensor.noise_variance=1e-4", "data_term=flow", "train.iterations=30",
-                    f"train.resume={out / 'checkpoint.pt'}", "figures=false",
+    r2 = nerif_here(*TINY, *realistic, "train.iterations=30", f"train.resume={out / 'checkpoint.pt'}", "figures=false",
                     f"hydra.run.dir={tmp_path / 'more'}")
     assert r2.returncode == 0, r2.stderr[-2000:]
     assert json.loads((tmp_path / "more" / "metrics.json").read_text())["iterations"] == 30
@@ -293,7 +292,6 @@ def test_a_signal_saves_a_checkpoint_says_so_in_one_line_and_the_run_resumes(tmp
         r = nerif_here(*TINY, f"train.iterations={done + 6}", f"hydra.run.dir={tmp_path}")
         assert r.returncode == 0 and f"at iteration {done + 3}" in r.stdout + r.stderr, r.stderr
         assert json.loads((tmp_path / "metrics.json").read_text())["iterations"] == done + 6
-
 
 
 def test_a_flame_free_scene_writes_strict_json_and_an_honest_summary_line(tmp_path):
