@@ -35,14 +35,14 @@ print(json.dumps({"s": time.perf_counter() - t, "sha": hashlib.sha256(image.toby
 """
 
 
-def time_once(tree: Path, name: str, size: tuple[int, int]) -> dict:
-    """Seconds to draw pattern ``name`` at ``size`` (rows, columns) with the code of ``tree``, and its image's hash."""
+def time_once(tree: Path, code: str, *args: str) -> dict:
+    """Run the timer ``code`` with ``args`` in a fresh Python on the code of ``tree`` (one thread) and return the
+    JSON it prints last; one sentence where it fails."""
     env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1"}
-    done = subprocess.run([sys.executable, "-c", TIMER, name, *map(str, size)], cwd=tree, env=env,
-                          capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-c", code, *args], cwd=tree, env=env, capture_output=True, text=True)
     if done.returncode:
         said = done.stderr.strip().splitlines() or [f"exit status {done.returncode}"]
-        raise SystemExit(f"{tree}: {name} at {size} failed: {said[-1]}")
+        raise SystemExit(f"{tree}: {' '.join(args)} failed: {said[-1]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -65,7 +65,7 @@ def main(argv=None) -> dict:
                 runs = {label: [] for label in trees}
                 for _ in range(args.repeats):
                     for label, tree in trees.items():
-                        runs[label].append(time_once(tree, name, size))
+                        runs[label].append(time_once(tree, TIMER, name, *map(str, size)))
                 rows[f"{name} {size[0]} x {size[1]}"] = {
                     label: {"median_s": sorted(r["s"] for r in got)[len(got) // 2], "sha256": got[0]["sha"]}
                     for label, got in runs.items()}

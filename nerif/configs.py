@@ -46,14 +46,37 @@ def _folders(root: Path) -> Optional[tuple]:
     return files if files == (str(root),) and not searched else None
 
 
+def _split(overrides: Sequence[str], root: Path) -> Optional[tuple[list[str], list]]:
+    """``overrides`` as Hydra splits them: the config-group choices (``data=capture``, ``+experiment=...``), which
+    decide the files a config is composed of, and the settings (``train.iterations=5``, ``+key=1``), which Hydra
+    applies to that config afterwards, parsed. None where Hydra is to compose them itself: an override of Hydra's
+    own, a sweep, a package, or one it cannot read (its error is Hydra's to say)."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    try:
+        parsed = OverridesParser.create().parse_overrides(list(overrides))
+    except Exception:
+        return None
+    choices, settings = [], []
+    for line, o in zip(overrides, parsed):
+        if o.key_or_group.startswith("hydra") or o.is_sweep_override() or o.package is not None:
+            return None
+        if (root / o.key_or_group).is_dir() and not isinstance(o.value(), dict):  # Hydra's test of a choice
+            choices.append(line)
+        else:
+            settings.append(o)
+    return choices, settings
+
+
 def compose(overrides: Sequence[str] = (), config_name: str = "config") -> DictConfig:
-    """The config ``python -m nerif OVERRIDES`` would run with (without Hydra's run folder): a copy of it, composed
-    once a process for the same overrides while no config file changes (composing reads every yaml: 0.2-0.4 s, and
-    a run checks its settings against the config of its group choices twice). Inside an initialised Hydra (a run),
-    from its search path; composed each time where that, or an override, adds a folder whose files are not
-    watched."""
+    """The config ``python -m nerif OVERRIDES`` would run with (without Hydra's run folder). Composing reads every
+    yaml (0.2-0.4 s), so the config of the same group choices is composed once a process while no config file
+    changes, and each call applies its settings to a copy of it, as Hydra applies them after composing. Inside an
+    initialised Hydra (a run), from its search path; composed each time where that, or an override, adds a folder
+    whose files are not watched."""
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
+    from hydra._internal.config_loader_impl import ConfigLoaderImpl
     from hydra.core.global_hydra import GlobalHydra
 
     root = config_dir()
@@ -61,17 +84,23 @@ def compose(overrides: Sequence[str] = (), config_name: str = "config") -> DictC
     if files != _FILES[0]:  # a config file changed (or another folder): nothing composed before holds
         _COMPOSED.clear()
         _FILES[0] = files
-    folders = _folders(root)
-    key = (config_name, tuple(overrides), folders)
-    if folders is not None and key in _COMPOSED:
-        return copy.deepcopy(_COMPOSED[key])
-    if GlobalHydra.instance().is_initialized():  # inside a run: Hydra's own search path
-        cfg = hydra_compose(config_name, overrides=list(overrides))
-    else:
+
+    def composed(lines: list[str]) -> DictConfig:
+        if GlobalHydra.instance().is_initialized():  # inside a run: Hydra's own search path
+            return hydra_compose(config_name, overrides=lines)
         with initialize_config_dir(config_dir=str(root), version_base=None):
-            cfg = hydra_compose(config_name, overrides=list(overrides))
-    if folders is not None and not any("searchpath" in o for o in overrides):
-        _COMPOSED[key] = copy.deepcopy(cfg)
+            return hydra_compose(config_name, overrides=lines)
+
+    folders = _folders(root)
+    split = _split(overrides, root) if folders is not None else None
+    if split is None:
+        return composed(list(overrides))
+    choices, settings = split
+    key = (config_name, tuple(choices), folders)
+    if key not in _COMPOSED:
+        _COMPOSED[key] = composed(choices)
+    cfg = copy.deepcopy(_COMPOSED[key])
+    ConfigLoaderImpl._apply_overrides_to_config(settings, cfg)  # what Hydra's compose does after the files
     return cfg
 
 

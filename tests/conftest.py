@@ -1,4 +1,5 @@
 import os
+from pathlib import Path
 
 # Triton kernels (nerif.encoders.hash_kernel) run in Triton's interpreter on the CPU; the switch is read when a
 # kernel is defined, so it is set before any test imports nerif.
@@ -22,6 +23,20 @@ def pytest_report_header(config):
         return (f"shared data: {SHARED} is not there (a fresh clone; set NERIF_SHARED to the folder holding data/): "
                 "the tests of the shared captures are skipped")
     return None
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups off the items
+def pytest_collection_modifyitems(config, items):
+    """Under ``pytest -n K`` (with ``--dist loadgroup``, pyproject.toml) the tests that share a module or session
+    fixture of this suite (a capture written, a series or an ensemble run) run in one process: it is built once,
+    not once in each process that draws one of them."""
+    for item in items:
+        info = getattr(item, "_fixtureinfo", None)
+        shared = sorted(f"{Path(defs[-1].baseid).stem}.{name}" for name in (info.names_closure if info else ())
+                        if (defs := info.name2fixturedefs.get(name)) and defs[-1].scope in ("module", "session")
+                        and defs[-1].baseid.startswith("tests"))
+        if shared:
+            item.add_marker(pytest.mark.xdist_group(shared[0]))
 
 
 @pytest.fixture(autouse=True)

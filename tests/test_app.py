@@ -6,6 +6,7 @@ import shlex
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -18,17 +19,11 @@ from tests.helpers import TINY, nerif_here, tiny_config
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def nerif(*args, cwd):
-    """``python -m nerif ARGS`` in a new Python: for the exit status, signals and the no-traceback contract."""
-    return subprocess.run([sys.executable, "-m", "nerif", *args], cwd=cwd, capture_output=True, text=True, timeout=600)
-
-
-def multirun(tmp_path, *overrides, here: bool = True):
-    """A sweep of the tiny scene into ``tmp_path/sweep`` (in this process, or with ``here=False`` a new Python): the
-    process, the folder and the summary's rows."""
+def multirun(tmp_path, *overrides):
+    """A sweep of the tiny scene into ``tmp_path/sweep``, in this process: the process, the folder and the summary's
+    rows."""
     sweep = tmp_path / "sweep"
-    args = ("-m", *TINY, *overrides, f"hydra.sweep.dir={sweep}")
-    r = nerif_here(*args) if here else nerif(*args, cwd=ROOT)
+    r = nerif_here("-m", *TINY, *overrides, f"hydra.sweep.dir={sweep}")
     table = sweep / "summary.csv"
     return r, sweep, list(csv.DictReader(table.open())) if table.is_file() else []
 
@@ -41,7 +36,7 @@ def test_a_run_writes_every_output(tmp_path):
     from its checkpoint (the images' stage with its figures: the capture's held-out run in test_capture)."""
     out = tmp_path / "run"
     realistic = ("data.sensing=realistic", "data.sensor.image_binning=8", "data.sensor.aperture_rays=8",
-                 "data.sensor.noise_variance=1e-4", "data_term=flow")
+                 "data.sensor.noise_variance=1e-4", "data_term=flow", f"data.cache_dir={tmp_path / 'cache'}")
     r = nerif_here(*TINY, *realistic, f"hydra.run.dir={out}")
     assert r.returncode == 0, r.stderr[-2000:]
     assert "nerif: T RMSE" in r.stdout and str(out) in r.stdout
@@ -78,7 +73,7 @@ def test_a_run_writes_every_output(tmp_path):
                 "eval/deflection_rmse_auto", "eval/deflection_rmse_discrete"):
         assert tag in tags["scalars"], tag
     assert {"slices", "profiles"} <= set(tags["images"]), tags["images"]
-    # resume to 30 iterations from the checkpoint
+    # resume to 30 iterations from the checkpoint (its measurement read back from the first run's cache)
     r2 = nerif_here(*TINY, *realistic, "train.iterations=30", f"train.resume={out / 'checkpoint.pt'}", "figures=false",
                     f"hydra.run.dir={tmp_path / 'more'}")
     assert r2.returncode == 0, r2.stderr[-2000:]
@@ -136,7 +131,7 @@ def test_a_failed_job_is_a_row_of_the_summary_and_the_sweep_exits_non_zero(tmp_p
 
 def test_a_multirun_through_the_joblib_launcher_shares_the_cores_and_lists_every_job(tmp_path):
     r, sweep, rows = multirun(tmp_path, "train.iterations=4", "seed=0,1", "hydra/launcher=joblib",
-                              "hydra.launcher.n_jobs=2", here=False)
+                              "hydra.launcher.n_jobs=2")
     assert r.returncode == 0, r.stderr[-2000:]
     assert sorted(row["config"].split(" ")[-1] for row in rows) == ["seed=0", "seed=1"]
     cores = len(os.sched_getaffinity(0))
@@ -260,29 +255,60 @@ def test_the_default_scene_is_within_the_target_error_at_a_sixth_of_its_iteratio
     assert m["temperature_rmse_K"] < 24.0, m["temperature_rmse_K"]
 
 
-@pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130), (signal.SIGUSR2, 140)])
-def test_a_signal_saves_a_checkpoint_says_so_in_one_line_and_the_run_resumes(tmp_path, monkeypatch, signum, code):
+def signal_once_training(signum) -> threading.Thread:
+    """A thread that sends this process ``signum`` once a run's training holds it (the run's own handler installed,
+    so that it can never land on the test's process unhandled), a moment into training."""
+    def send():
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if getattr(signal.getsignal(signum), "__qualname__", "").startswith("stop_signals"):
+                time.sleep(0.5)
+                os.kill(os.getpid(), signum)
+                return
+            time.sleep(0.02)
+
+    thread = threading.Thread(target=send, daemon=True)
+    thread.start()
+    return thread
+
+
+@pytest.mark.parametrize("signum, code, here", [(signal.SIGTERM, 143, False), (signal.SIGINT, 130, True),
+                                                (signal.SIGUSR2, 140, True)])
+def test_a_signal_saves_a_checkpoint_says_so_in_one_line_and_the_run_resumes(tmp_path, monkeypatch, signum, code,
+                                                                             here):
     """SIGTERM (Slurm preemption, timeout, a container stop) and SIGUSR2 (Slurm's time-limit warning) as Ctrl-C:
     a checkpoint, one warning, no traceback; the run continues from it by path, and in the same folder with
-    ``train.resume=auto`` or as a requeued Slurm job (``SLURM_RESTART_COUNT``)."""
+    ``train.resume=auto`` or as a requeued Slurm job (``SLURM_RESTART_COUNT``). SIGTERM in a new Python, as a
+    scheduler sends it; the others to this process, which runs the same command."""
     args = [*TINY, "train.iterations=100000", "train.eval_every=100000", "train.checkpoint_every=100000",
             f"hydra.run.dir={tmp_path}"]
-    # SIGINT as in a terminal: a job a shell started in the background (CI's, for one) inherits it ignored
-    p = subprocess.Popen([sys.executable, "-m", "nerif", *args], cwd=ROOT, stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True,
-                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    deadline = time.monotonic() + 300
-    while not (tmp_path / "tensorboard").is_dir() and time.monotonic() < deadline:  # training has started
-        time.sleep(0.2)
-    time.sleep(1.0)
-    p.send_signal(signum)
-    out = p.communicate(timeout=120)[0]
-    assert p.returncode == code, out
+    if here:
+        # SIGINT as in a terminal: a job a shell started in the background (CI's, for one) inherits it ignored
+        before = signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            thread = signal_once_training(signum)
+            r = nerif_here(*args)
+            thread.join(timeout=10)
+        finally:
+            signal.signal(signal.SIGINT, before)
+        returncode, out = r.returncode, r.stdout + r.stderr
+    else:
+        p = subprocess.Popen([sys.executable, "-m", "nerif", *args], cwd=ROOT, stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        deadline = time.monotonic() + 300
+        while not (tmp_path / "tensorboard").is_dir() and time.monotonic() < deadline:  # training has started
+            time.sleep(0.2)
+        time.sleep(1.0)
+        p.send_signal(signum)
+        out = p.communicate(timeout=120)[0]
+        returncode = p.returncode
+    assert returncode == code, out
     assert "Traceback" not in out and out.count("checkpoint saved to") == 1, out
     done = torch.load(tmp_path / "checkpoint.pt", weights_only=False)["iteration"]
     assert done > 0
     r = nerif_here(*TINY, f"train.resume={tmp_path / 'checkpoint.pt'}", f"train.iterations={done + 5}",
-                   f"hydra.run.dir={tmp_path / 'resumed'}")  # the resumes in this process: the signal's was a new one
+                   f"hydra.run.dir={tmp_path / 'resumed'}")
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "resumed" / "metrics.json").read_text())["iterations"] == done + 5
     if signum == signal.SIGUSR2:  # the same folder: by auto, then as a requeued job without any setting

@@ -54,6 +54,31 @@ def test_a_config_is_composed_once_and_again_when_a_file_changes(tmp_path, monke
     assert compose(["encoder=hash"]).train.iterations == 1300
 
 
+@pytest.mark.parametrize("overrides", [
+    ["train.iterations=5", "encoder=frequency", "field.hidden=[32,16]"],
+    ["+experiment=paper_phantom5", "train.lr=1e-3", "data.T_max=${train.lr}"],
+    ["data=capture", "data.root=x", "~train.image_every", "+train.extra=3", "++loss.new=[1,2]"],
+    ["phantom=file", "phantom.path=x.npy", "phantom.voxel_mm=1.0", "rig.n_cameras=3", "solver=cgls"],
+])
+def test_a_config_kept_for_its_group_choices_takes_the_settings_as_hydra_does(overrides):
+    """compose() keeps the config of the group choices and applies the settings to a copy: the very config Hydra
+    composes from all the overrides at once (values, +/++/~, lists, interpolations), and the same refusal of a
+    setting no block has."""
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+    from hydra.errors import ConfigCompositionException
+    from omegaconf import OmegaConf
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base=None):
+        hydras = hydra_compose("config", overrides=overrides)
+    for _ in range(2):  # composed, then kept
+        ours = compose(overrides)
+        assert OmegaConf.to_yaml(ours) == OmegaConf.to_yaml(hydras)
+        assert OmegaConf.is_struct(ours)
+    with pytest.raises(ConfigCompositionException, match="train.iteration"):
+        compose([*overrides, "train.iteration=3"])
+
+
 def test_a_config_composed_inside_another_hydra_folder_is_that_folders_not_the_kept_one(tmp_path):
     """A caller that initialised Hydra on its own copy of the configs (or a run with ``hydra.searchpath``) composes
     from those files, whose changes compose() does not watch: never the config it kept from nerif's own folder."""

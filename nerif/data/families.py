@@ -75,9 +75,12 @@ def blob_sum(centres: np.ndarray, widths: np.ndarray, amplitudes: np.ndarray) ->
     c, w, a = (torch.as_tensor(np.asarray(x, np.float64)) for x in (centres, widths, amplitudes))
 
     def sigma(p: torch.Tensor) -> torch.Tensor:
-        shape = p.shape[:-1]
-        q = p.reshape(-1, 1, 3) - c
-        return (a * torch.exp(-(q * q).sum(-1) / (2 * w * w))).sum(-1).reshape(shape)
+        shape, flat = p.shape[:-1], p.reshape(-1, 3)
+        parts = []
+        for i in range(0, max(len(flat), 1), 8192):  # (points, blobs, 3) a few MB at a time: 3x faster on a box
+            q = flat[i:i + 8192, None] - c
+            parts.append((a * torch.exp(-(q * q).sum(-1) / (2 * w * w))).sum(-1))
+        return torch.cat(parts).reshape(shape)
 
     return sigma
 
