@@ -3,7 +3,7 @@ deflects."""
 import numpy as np
 import torch
 
-from nerif.sensing.imaging import diffraction_blur, expose, warp
+from nerif.sensing.imaging import diffraction_blur, expose
 from nerif.sensing.measurement import measure_view
 from nerif.sensing.patterns import PATTERNS
 from nerif.sensing.shake import rigid_shift
