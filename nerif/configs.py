@@ -27,7 +27,7 @@ def config_dir() -> Path:
                             "holds config.yaml (reinstall nerif)")
 
 
-_COMPOSED: dict = {}  # (config name, overrides, folders) -> its config, from the config files as _FILES saw them
+_COMPOSED: dict = {}  # (config name, group choices, folders) -> their config, from the files as _FILES saw them
 _FILES: list = [None]  # the config files' paths, sizes and times when _COMPOSED was filled
 
 

@@ -75,10 +75,10 @@ def blob_sum(centres: np.ndarray, widths: np.ndarray, amplitudes: np.ndarray) ->
     c, w, a = (torch.as_tensor(np.asarray(x, np.float64)) for x in (centres, widths, amplitudes))
 
     def sigma(p: torch.Tensor) -> torch.Tensor:
-        shape, flat = p.shape[:-1], p.reshape(-1, 3)
+        shape, flat, n = p.shape[:-1], p.reshape(-1, 3), 8192  # (n, blobs, 3) a few MB at a time: 2x faster on a box
         parts = []
-        for i in range(0, max(len(flat), 1), 8192):  # (points, blobs, 3) a few MB at a time: 3x faster on a box
-            q = flat[i:i + 8192, None] - c
+        for i in range(0, max(len(flat), 1), n):
+            q = flat[i:i + n, None] - c
             parts.append((a * torch.exp(-(q * q).sum(-1) / (2 * w * w))).sum(-1))
         return torch.cat(parts).reshape(shape)
 
