@@ -2,13 +2,16 @@
 
     python benchmarks/poses.py                                  # bunsen, lifted, a family member, the multicam
     python benchmarks/poses.py --captures independent_capture_bunsen --set train.iterations=600
+    python benchmarks/poses.py --captures independent_capture_lifted --turns -0.9 0.7 1.9 3.9 2.7 -0.8 2.6 -0.2 -0.9 \\
+        --distance-mm 0                                         # issue 69's rig file, its angles as a hand left them
 
 For each capture, its rig is disturbed as a rig measured by hand is: every view turned about the vertical axis by an
-angle drawn uniformly in +-``--angle-deg`` and its camera moved along its line to the probe centre by a distance
-drawn in +-``--distance-mm`` (both of zero mean over the training views: the mean frame of a rig is the truth's,
-or no method could score against the truth's grid). The disturbed rig is written as a calibrated capture folder
-(version 3, an OpenCV calibration; links to the images) under ``--out``; the capture's own images and truth are
-used. Four runs per capture: the true rig and the disturbed one, each with ``poses=given`` and ``poses=refined``.
+angle drawn uniformly in +-``--angle-deg`` (or by the angles ``--turns`` lists) and its camera moved along its line
+to the probe centre by a distance drawn in +-``--distance-mm`` (both of zero mean over the training views: the mean
+frame of a rig is the truth's, or no method could score against the truth's grid). The disturbed rig is written as a
+calibrated capture folder (version 3, an OpenCV calibration; links to the images) under ``--out``; the capture's own
+images and truth are used. Four runs per capture: the true rig and the disturbed one, each with ``poses=given`` and
+``poses=refined``.
 
 Rows: sigma error against the truth, the held-out view's displacement RMSE, the angles the refinement found
 against the disturbance (the largest error over the training views), the run time. Targets (issue 58): with
@@ -47,9 +50,11 @@ def turned(angle_deg: float) -> np.ndarray:
     return np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
 
 
-def disturbed_capture(src: Path, dst: Path, angle_deg: float, distance_mm: float, seed: int) -> tuple[Path, list]:
+def disturbed_capture(src: Path, dst: Path, angle_deg: float, distance_mm: float, seed: int,
+                      turns: list[float] | None = None) -> tuple[Path, list]:
     """``src`` with its cameras turned and moved (see the module docstring) as a version-3 capture folder ``dst``;
-    returns the folder and each view's turn [deg]."""
+    ``turns``: each view's turn [deg] given (one a view) instead of drawn. Returns the folder and each training
+    view's turn [deg]."""
     rig = read_rig(src)
     cams = rig.cameras()
     V = len(cams)
@@ -57,6 +62,10 @@ def disturbed_capture(src: Path, dst: Path, angle_deg: float, distance_mm: float
     train = [v for v in range(V) if v not in held]
     rng = np.random.default_rng(seed)
     turn, move = rng.uniform(-angle_deg, angle_deg, V), rng.uniform(-distance_mm, distance_mm, V)
+    if turns is not None:
+        if len(turns) != V:
+            raise SystemExit(f"--turns gives {len(turns)} turns for the {V} views of {src}")
+        turn = np.asarray(turns, dtype=np.float64)
     turn[train] -= turn[train].mean()
     move[train] -= move[train].mean()
     moved = []
@@ -105,6 +114,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--angle-deg", type=float, default=4.0)
     ap.add_argument("--distance-mm", type=float, default=10.0)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--turns", nargs="+", type=float, default=None,
+                    help="each view's turn [deg] instead of drawn ones (one a view of every capture of the call), e.g. "
+                         "a rig file's angles as a hand left them")
     run_arguments(ap, "benchmarks/results/poses")
     args = ap.parse_args(argv)
     out = Path(args.out).resolve()
@@ -114,7 +126,8 @@ def main(argv=None) -> dict:
         truth = f"data.truth={src / 'volume.npz'}"
         if not (src / "rig.yaml").is_file():  # the multicam capture: its calibration read through a rig file
             src = multicam_folder(out / f"{tag}_given", False)
-        folder, turn = disturbed_capture(src, out / f"{tag}_disturbed", args.angle_deg, args.distance_mm, args.seed)
+        folder, turn = disturbed_capture(src, out / f"{tag}_disturbed", args.angle_deg, args.distance_mm, args.seed,
+                                         args.turns)
         cells = {(rig, poses): f"data=capture data.root={root} {truth} poses={poses}"
                  for rig, root in (("true", src), ("disturbed", folder)) for poses in ("given", "refined")}
         rows = run_cells(list(cells.values()), args.set, out / tag, resume=args.resume)

@@ -301,7 +301,9 @@ def log_refined(found: dict) -> None:
     nothing where the poses are the rig's (``found`` empty)."""
     if not found:
         return
-    log.info("refined poses: turns about the vertical axis %s deg; largest rotation %.2f deg, translation %.2f mm",
+    log.info("refined poses: turns about the vertical axis %s deg (of zero mean: a turn every view shares, the rig "
+             "turned as a whole, changes no image and turns the reconstruction with it; no refinement sees it); "
+             "largest rotation %.2f deg, translation %.2f mm",
              ", ".join(f"{a:+.2f}" for a in found["pose_angle_deg"]), found["pose_rotation_max_deg"],
              found["pose_translation_max_mm"])
     if "pose_warning" in found:
