@@ -2,24 +2,25 @@
 
     python benchmarks/figures.py --against 4737a23 --out /tmp/figures
 
-Each figure of :data:`FIGURES`, drawn from made-up inputs of a shared capture's size (a 240 x 320 px view on a ray
-grid 8 px apart, a 30 x 50 x 30 probe box, 9 views) and written as PNG bytes as a run writes it, ``--repeats``
-times in a fresh Python per checkout (the checkouts alternate, so that a change in the machine's load falls on
-both; the first drawing of a process, which loads fonts, is not timed). Prints the median seconds per figure and
-writes ``figures.json`` under ``--out``. Times are this machine's: compare the columns of one run. The figures of
-two checkouts need not be the same images (a layout is what a change may move): look at them.
+Each figure of :data:`FIGURES`, drawn from made-up inputs smaller than a shared capture (a 240 x 320 px view on a
+ray grid 8 px apart, a 30 x 50 x 30 probe box of 2 mm voxels, 9 views) and written as PNG bytes as a run writes it,
+``--repeats`` times in a fresh Python per checkout (the checkouts alternate, so that a change in the machine's load
+falls on both; the first drawing of a process, which loads fonts, is not timed). Prints the median seconds per
+figure and writes ``figures.json`` and ``figures.md`` under ``--out``. Times are this machine's: compare the columns
+of one run. The figures of two checkouts need not be the same images (a layout is what a change may move): look at
+them.
 """
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from contextlib import ExitStack
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from patterns import time_once  # noqa: E402
+from ablation import write_report  # noqa: E402
+from patterns import alternating_runs  # noqa: E402
 from speed import checkout  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -58,23 +59,18 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--against", nargs="*", default=[], help="git refs or folders to time beside this checkout")
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--out", type=Path, default=Path("benchmarks/out/figures"))
+    ap.add_argument("--out", type=Path, default=Path("benchmarks/results/figures"))
     args = ap.parse_args(argv)
     rows = {}
     with ExitStack() as stack:
         trees = {"this checkout": REPO, **{ref: checkout(ref, stack) for ref in args.against}}
         for name, call in FIGURES.items():
-            runs = {label: [] for label in trees}
-            for _ in range(args.repeats):
-                for label, tree in trees.items():
-                    runs[label].append(time_once(tree, TIMER, call)["s"])
-            rows[name] = {label: sorted(got)[len(got) // 2] for label, got in runs.items()}
+            runs = alternating_runs(trees, args.repeats, TIMER, call)
+            rows[name] = {label: sorted(r["s"] for r in got)[len(got) // 2] for label, got in runs.items()}
     labels = list(trees)
     lines = ["| figure | " + " | ".join(f"{lab} [s]" for lab in labels) + " |", "|---|" + "---|" * len(labels)]
     lines += [f"| {name} | " + " | ".join(f"{row[lab]:.3f}" for lab in labels) + " |" for name, row in rows.items()]
-    print("\n".join(lines))
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "figures.json").write_text(json.dumps({"median_s": rows, "repeats": args.repeats}, indent=1))
+    write_report(args.out, "figures", {"median_s": rows, "repeats": args.repeats}, "\n".join(lines) + "\n")
     return rows
 
 
