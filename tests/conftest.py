@@ -12,7 +12,9 @@ import pytest
 import torch
 
 if os.environ.get("PYTEST_XDIST_WORKER_COUNT"):  # pytest -n K: K processes share the cores, a thread each by default
-    torch.set_num_threads(max(1, (os.cpu_count() or 1) // int(os.environ["PYTEST_XDIST_WORKER_COUNT"])))
+    from tests.helpers import worker_threads
+
+    torch.set_num_threads(worker_threads())
 
 
 def pytest_report_header(config):

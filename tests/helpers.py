@@ -14,7 +14,16 @@ from nerif.geometry import ProbeBox
 from nerif.physics import Ambient
 from nerif.solvers import SOLVERS
 
-TINY = ["device=cpu", "phantom=gaussian_blob", "phantom.shape=[16,16,16]", "phantom.voxel_mm=3.0",
+def worker_threads() -> int:
+    """CPU threads of one test process: under ``pytest -n K`` its share of the cores (``tests/conftest.py`` sets
+    torch's), else every core."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    return max(1, (os.cpu_count() or 1) // workers)
+
+
+# a run of the suite starts with its process's share of the cores, told rather than measured (threads=auto samples
+# the machine's load for 0.2 s a run, then times its steps at other counts: tests/test_threads.py)
+TINY = [f"threads={worker_threads()}", "device=cpu", "phantom=gaussian_blob", "phantom.shape=[16,16,16]", "phantom.voxel_mm=3.0",
         "phantom.width_mm=7.0", "rig.n_cameras=6", "rig.binning=40", "sampler.samples_per_ray=16",
         "train.iterations=20", "train.rays_per_batch=64", "train.eval_every=10", "metrics.eval_rays_per_view=32",
         "train.checkpoint_every=10", "train.progress=false", "data.cache_dir=null", "data.render_supersample=1",

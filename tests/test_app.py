@@ -131,7 +131,7 @@ def test_a_failed_job_is_a_row_of_the_summary_and_the_sweep_exits_non_zero(tmp_p
 
 def test_a_multirun_through_the_joblib_launcher_shares_the_cores_and_lists_every_job(tmp_path):
     r, sweep, rows = multirun(tmp_path, "train.iterations=4", "seed=0,1", "hydra/launcher=joblib",
-                              "hydra.launcher.n_jobs=2")
+                              "hydra.launcher.n_jobs=2", "threads=auto")
     assert r.returncode == 0, r.stderr[-2000:]
     assert sorted(row["config"].split(" ")[-1] for row in rows) == ["seed=0", "seed=1"]
     cores = len(os.sched_getaffinity(0))
