@@ -13,21 +13,22 @@ from nerif.configs import compose, group
 from nerif.geometry import ProbeBox
 from nerif.physics import Ambient
 from nerif.solvers import SOLVERS
+from nerif.threads import usable_cores
+
 
 def worker_threads() -> int:
-    """CPU threads of one test process: under ``pytest -n K`` its share of the cores (``tests/conftest.py`` sets
-    torch's), else every core."""
-    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
-    return max(1, (os.cpu_count() or 1) // workers)
+    """CPU threads of one test process: under ``pytest -n K`` its share of the cores it may use
+    (:func:`nerif.threads.usable_cores`; ``tests/conftest.py`` sets torch's), else all of them."""
+    return max(1, usable_cores() // int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
 
 
 # a run of the suite starts with its process's share of the cores, told rather than measured (threads=auto samples
 # the machine's load for 0.2 s a run, then times its steps at other counts: tests/test_threads.py)
-TINY = [f"threads={worker_threads()}", "device=cpu", "phantom=gaussian_blob", "phantom.shape=[16,16,16]", "phantom.voxel_mm=3.0",
-        "phantom.width_mm=7.0", "rig.n_cameras=6", "rig.binning=40", "sampler.samples_per_ray=16",
-        "train.iterations=20", "train.rays_per_batch=64", "train.eval_every=10", "metrics.eval_rays_per_view=32",
-        "train.checkpoint_every=10", "train.progress=false", "data.cache_dir=null", "data.render_supersample=1",
-        "field.finest_resolution=32", "field.log2_table_size=12",
+TINY = [f"threads={worker_threads()}", "device=cpu", "phantom=gaussian_blob", "phantom.shape=[16,16,16]",
+        "phantom.voxel_mm=3.0", "phantom.width_mm=7.0", "rig.n_cameras=6", "rig.binning=40",
+        "sampler.samples_per_ray=16", "train.iterations=20", "train.rays_per_batch=64", "train.eval_every=10",
+        "metrics.eval_rays_per_view=32", "train.checkpoint_every=10", "train.progress=false", "data.cache_dir=null",
+        "data.render_supersample=1", "field.finest_resolution=32", "field.log2_table_size=12",
         "uncertainty=none"]  # the default (auto) trains members wherever a view is held out: tested on its own
 # a capture of 7 views through the realistic chain (the `written` fixture of tests/conftest.py)
 SMALL = ["rig.width_px=240", "rig.height_px=320", "rig.binning=8", "phantom.shape=[16,16,16]", "phantom.voxel_mm=2.0",
