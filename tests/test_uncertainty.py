@@ -106,7 +106,7 @@ def family_run(tmp_path_factory):
     overrides = write_dataset(root / "data", flame, binning=16)
     cfg = compose(overrides + ["data.binning=1", "data.pitch_um=320", "train.progress=false", "device=cpu",
                                "data_term=flow", "train.iterations=100", "train.rays_per_batch=256",
-                               "sampler.samples_per_ray=32", "field.log2_table_size=12", "uncertainty=ensemble",
+                               "sampler.samples_per_ray=16", "field.log2_table_size=12", "uncertainty=ensemble",
                                "uncertainty.members=2", "uncertainty.fraction=0.5"])
     return run(cfg, root / "run"), root / "run"
 

@@ -8,7 +8,7 @@ Here the corners, their weights, the gathers and the blend are computed per poin
 (N, L F) encoding is written; the backward pass recomputes the corners and adds ``w * dL/dy`` into the table's
 gradient. Two backends compute the same function as the tensor path (same cells, hashing and weights):
 
-- ``triton`` (CUDA): one program per block of 128 points and one level; atomic adds in the backward pass.
+- ``triton`` (CUDA): one program per block of :data:`BLOCK` points and one level; atomic adds in the backward pass.
   Triton ships with CUDA builds of PyTorch; on the CPU its interpreter runs it (``TRITON_INTERPRET=1``, the tests).
 - ``cpp`` (CPU): ``hash_cpu.cpp``, compiled once per Python environment by ``torch.utils.cpp_extension`` (a C++
   compiler with OpenMP, and ninja, which nerif depends on): points in parallel forward, levels in parallel backward
@@ -150,7 +150,9 @@ if triton is not None:
                 tl.atomic_add(grad_table_ptr + row * F + f, w * g, mask=live, sem="relaxed")
 
 
-_BLOCK = 128
+# points per program: 128 on a GPU; 512 in Triton's interpreter, where a program is a sequence of NumPy steps in
+# Python (fewer, larger ones: half the interpreted kernels' time, the same function)
+BLOCK = 512 if os.environ.get("TRITON_INTERPRET") == "1" else 128
 
 
 class FusedHashEncoding(torch.autograd.Function):
@@ -168,8 +170,8 @@ class FusedHashEncoding(torch.autograd.Function):
         else:
             y = torch.empty(n, L * F, device=x.device, dtype=torch.float32)
             if n:
-                _forward[(triton.cdiv(n, _BLOCK), L)](x, table, y, resolution, mask, offset, mult, n, L, F=F,
-                                                      BLOCK=_BLOCK, SMOOTH=smooth)
+                _forward[(triton.cdiv(n, BLOCK), L)](x, table, y, resolution, mask, offset, mult, n, L, F=F,
+                                                     BLOCK=BLOCK, SMOOTH=smooth)
         ctx.save_for_backward(x, resolution, mask, offset, mult)
         ctx.table_shape, ctx.smooth, ctx.backend = table.shape, smooth, backend
         return y
@@ -186,6 +188,6 @@ class FusedHashEncoding(torch.autograd.Function):
         else:
             grad_table = torch.zeros(ctx.table_shape, device=x.device, dtype=torch.float32)
             if n:
-                _backward[(triton.cdiv(n, _BLOCK), L)](x, grad_y, grad_table, resolution, mask, offset, mult, n, L,
-                                                       F=F, BLOCK=_BLOCK, SMOOTH=ctx.smooth)
+                _backward[(triton.cdiv(n, BLOCK), L)](x, grad_y, grad_table, resolution, mask, offset, mult, n, L,
+                                                      F=F, BLOCK=BLOCK, SMOOTH=ctx.smooth)
         return None, grad_table, None, None, None, None, None, None
