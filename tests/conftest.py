@@ -9,17 +9,20 @@ os.environ.setdefault("TRITON_INTERPRET", "1")
 os.environ["NERIF_FIGURES"] = "false"
 
 import pytest
-import torch
 
 if os.environ.get("PYTEST_XDIST_WORKER_COUNT"):  # pytest -n K: K processes share the cores, a thread each by default
+    import torch
+
     from tests.helpers import worker_threads
 
     torch.set_num_threads(worker_threads())
+# torch and nerif are imported where tests run, not here at the top: under -n K pytest's main process reads this
+# file before it starts the workers, and it runs no test (importing them there delayed every worker by 3-4 s)
 
 
 def pytest_report_header(config):
     """One line at the top of the run where the project's shared captures are not beside the clone."""
-    from tests.helpers import SHARED
+    from tests.paths import SHARED
 
     if not SHARED.is_dir():
         return (f"shared data: {SHARED} is not there (a fresh clone; set NERIF_SHARED to the folder holding data/): "
@@ -49,6 +52,8 @@ def _figures(request, monkeypatch):
 
 @pytest.fixture(autouse=True)
 def _seed():
+    import torch
+
     torch.manual_seed(0)
 
 

@@ -14,6 +14,7 @@ from nerif.geometry import ProbeBox
 from nerif.physics import Ambient
 from nerif.solvers import SOLVERS
 from nerif.threads import usable_cores
+from tests.paths import ROOT, SHARED
 
 
 def worker_threads() -> int:
@@ -68,8 +69,6 @@ def trained_on_half_the_box(iterations: int = 60):
     return s, scene
 
 
-ROOT = Path(__file__).resolve().parents[1]  # the clone
-SHARED = Path(os.environ.get("NERIF_SHARED", Path(__file__).resolve().parents[2] / "shared")) / "data"
 
 
 def shared_data(name: str) -> Path:
