@@ -69,8 +69,6 @@ def trained_on_half_the_box(iterations: int = 60):
     return s, scene
 
 
-
-
 def shared_data(name: str) -> Path:
     """The folder ``name`` of the project's shared data (``../shared/data`` beside the clone, or
     ``$NERIF_SHARED/data``); where it is not there (a fresh clone), the test is skipped with one line saying so."""

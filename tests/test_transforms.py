@@ -99,7 +99,7 @@ def test_masks_back_project_onto_the_authors_3d_mask(phantom1):
     """Our visual hull of their 2-D masks against their 3-D mask, both sampled at 1 mm (IoU 0.908; 0.918 on the
     0.5 mm probe grid, 9x the time)."""
     scene = load_views(phantom1, "train", BOX, Ambient(1100.0, 1.00007253, None), optics(), binning=8)
-    coarse = ProbeBox((70, 147, 70), 1.0)
+    coarse = ProbeBox(tuple(n // 2 for n in BOX.shape), 2 * BOX.voxel_mm)  # the same box in 1 mm voxels
     ours = back_project(coarse, scene.cameras, scene.mask_images)
     theirs = reference_mask3d(str(phantom1), coarse)
     iou = (ours & theirs).sum() / (ours | theirs).sum()
