@@ -62,6 +62,7 @@ def slice_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] = No
             ax.set_xlabel("x [mm]", fontsize=8, labelpad=1)
             ax.set_ylabel("y [mm] (burner axis)" if iy is None else "z [mm]", fontsize=8, labelpad=1)
             ax.tick_params(labelsize=7)
+            ax.locator_params(nbins=4)  # 16 panels: every tick is an object drawn (a quarter of the figure's time)
             where = f"z = {ax_z[iz]:.1f} mm" if iy is None else f"y = {ax_y[iy]:.1f} mm"
             ax.set_title(f"{name} [{unit}], {where}", fontsize=8)
             if iy is None:
@@ -93,7 +94,8 @@ def profiles_figure(T: np.ndarray, box: ProbeBox, T_true: Optional[np.ndarray] =
         columns.append(((px, pz), f"vertical through the {'true ' if T_true is not None else ''}peak "
                                   f"(x = {ax_x[px]:.1f}, z = {ax_z[pz]:.1f} mm)"))
     fig, axes = plt.subplots(1, len(columns) + len(heights), figsize=(4.2 * (len(columns) + len(heights)), 4.2),
-                             squeeze=False, layout="constrained")
+                             squeeze=False)
+    fixed_margins(fig, left=0.65, right=0.15, bottom=0.5, top=0.65 if title else 0.35, wspace=0.28)
     lines = [(ax_y, T[i, :, k], None if std is None else std[i, :, k], None if T_true is None else T_true[i, :, k],
               name, "y [mm]") for (i, k), name in columns]
     lines += [(ax_x, T[:, iy, iz], None if std is None else std[:, iy, iz],
@@ -145,6 +147,13 @@ def sequence_figure(frames: list[tuple[str, np.ndarray, Optional[np.ndarray]]], 
     return fig
 
 
+def fixed_margins(fig, left: float, right: float, bottom: float, top: float, wspace: float = 0.25) -> None:
+    """Place ``fig``'s subplots with margins in inches (a constrained layout measures every tick label on each draw:
+    0.6-0.8 s a figure, the largest part of a run's pictures)."""
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h, wspace=wspace)
+
+
 def save_figure(fig, path: Path) -> Path:
     path = atomic_write(Path(path), lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     plt.close(fig)
@@ -176,7 +185,8 @@ def curves_figure(history: list[dict], losses: list[tuple[int, dict]], images_fr
     evaluation errors against wall time (the temperature's RMSE where a truth is known, else the deflections', in
     ``deflection_unit``). The data term is normalised by what it compares (the deflections' or the images' mean
     square), so its level changes where the fit switches from one to the other."""
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.4), layout="constrained")  # laid out as it is drawn, once
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.4))
+    fixed_margins(fig, left=1.1, right=0.15, bottom=1.2, top=0.35, wspace=0.3)  # below: the legend's rows
     if losses:
         it = np.array([i for i, _ in losses])
         names = [k for k in losses[0][1] if k.startswith("loss")]
@@ -252,7 +262,8 @@ def heldout_figure(observed: np.ndarray, predicted: np.ndarray, unit: str, title
     panels = [(f"observed |{what}| [{unit}]", mag_o, dict(cmap="viridis", vmin=0, vmax=vmax or 1.0)),
               (f"predicted |{what}| [{unit}]", mag_p, dict(cmap="viridis", vmin=0, vmax=vmax or 1.0)),
               (f"|predicted - observed| [{unit}]", diff, dict(cmap="magma", vmin=0, vmax=dmax or 1.0))]
-    fig, axes = plt.subplots(1, 3, figsize=(11.5, 3.2 * h / max(w, 1) + 1.6), squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(1, 3, figsize=(11.5, 3.2 * h / max(w, 1) + 1.6), squeeze=False)
+    fixed_margins(fig, left=0.7, right=0.95, bottom=0.5, top=0.75, wspace=0.6)  # a colour bar right of each
     for ax, (name, img, kw) in zip(axes[0], panels):
         im = ax.imshow(img, extent=(0, w * block_px, h * block_px, 0), interpolation="nearest", **kw)
         ax.set_facecolor("#b0b0b0")
