@@ -435,11 +435,12 @@ def rig_figure(cameras: list, box: ProbeBox, heldout: set, pictures: list, title
     cols = min(4, max(len(shown), 1))
     rows = max(1, -(-len(shown) // cols))
     if shown:
-        fig = plt.figure(figsize=(5.5 + 2.4 * cols, max(5.5, 2.9 * rows)), layout="constrained")
-        grid = fig.add_gridspec(rows, cols + 2)
+        fig = plt.figure(figsize=(5.5 + 2.4 * cols, max(5.5, 2.9 * rows)))
+        grid = fig.add_gridspec(rows, cols + 2, hspace=0.3)
         top = fig.add_subplot(grid[:, :2])
     else:  # no pictures (deflections given): the view from above alone
-        fig, top = plt.subplots(figsize=(7.5, 7.5), layout="constrained")
+        fig, top = plt.subplots(figsize=(7.5, 7.5))
+    fixed_margins(fig, left=0.9, right=0.2, bottom=0.55, top=0.95, wspace=0.15)  # above: three lines of title
     _rig_from_above(top, cameras, box, heldout)
     h = np.asarray(box.half_mm, dtype=np.float64)
     edges = _box_edges(box)
