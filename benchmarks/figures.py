@@ -32,6 +32,9 @@ FIGURES = {
     "slices": "slice_figure(T, box, T, 'slices')",
     "profiles": "profiles_figure(T, box, T, 'profiles')",
     "rig": "rig_figure(cameras, box, {4}, [(np.linalg.norm(u, axis=-1), 'd')] * 9)",
+    "curves": "curves_figure(history, losses, 1200, 'rad')",
+    "2-D masks": "masks_figure([np.linalg.norm(u, axis=-1)] * 8, [left_out == 0] * 8, [f'view {v}' for v in range(8)], "
+                 "'px', block_px=8)",
 }
 
 TIMER = """
@@ -47,6 +50,8 @@ left_out = (rng.random((40, 30)) < 0.1).astype(int) * 2
 box = ProbeBox((30, 50, 30), 2.0)
 T = 300 + 1500 * np.exp(-((np.indices(box.shape) - np.array(box.shape)[:, None, None, None] / 2) ** 2).sum(0) / 50)
 cameras = arc_rig(n_cameras=9, width_px=240, height_px=320, binning=8)
+history = [{"wall_time_s": 4.0 * i, "temperature_rmse_K": 40.0 / i, "iteration": 100 * i} for i in range(1, 19)]
+losses = [(i, {"loss": 1.0 / i, "loss_discrete": 1.0 / i, "loss_boundary": 1e-4}) for i in range(1, 1800, 10)]
 draw = lambda: png_bytes(eval(sys.argv[1]))
 draw()
 t = time.perf_counter()
