@@ -124,3 +124,46 @@ def test_the_rig_figure_shows_the_sense_of_the_order_and_the_world_axes_in_each_
     assert fig.axes[5].get_title() == "camera 04, held out"
     img = cv2.imread(str(save_figure(fig, tmp_path / "rig.png")))
     assert img is not None and img.std() > 10
+
+
+def test_figures_placed_by_margins_keep_every_label_colour_bar_and_legend_inside_the_picture():
+    """The profiles, curves, held-out and rig figures are placed with margins in inches, not by a layout that measures
+    their labels: on shapes a run meets (a tall and a wide view, a 9-view rig, a long legend), every axes' extent with
+    its tick labels, titles, colour bars, legend and annotations lies within the figure, and no two panels' (with their
+    labels and annotations) overlap."""
+    from matplotlib.transforms import Bbox
+
+    from nerif.geometry.camera import arc_rig
+    from nerif.io.plots import rig_figure
+
+    box = ProbeBox((30, 50, 30), 2.0)
+    T = 300.0 + 1500.0 * np.exp(-((np.indices(box.shape) - 12.0) ** 2).sum(0) / 40.0)
+    hist = [{"iteration": 100 * i, "wall_time_s": 4.0 * i, "temperature_rmse_K": 40.0 / i} for i in range(1, 19)]
+    terms = {"loss": 1.0, "loss_discrete": 1.0, "loss_boundary": 1e-4, "loss_tv": 1e-3}
+    cams = arc_rig(9, 160.0, width_px=240, height_px=320, binning=8)
+    u = np.random.default_rng(0).normal(size=(40, 30, 2))
+    figures = {"profiles": profiles_figure(T, box, T + 5.0, "a title", std=np.full(box.shape, 9.0)),
+               "curves": curves_figure(hist, [(i, terms) for i in range(1, 1800, 10)], 1200, "rad"),
+               "curves, a wider legend": curves_figure(hist, [(i, {k: terms[k] for k in list(terms)[:3]})
+                                                              for i in range(1, 1800, 10)], 1200, "rad"),
+               "held out, tall": heldout_figure(u, u + 0.1, "px", "camera 4", block_px=8),
+               "held out, wide": heldout_figure(u.transpose(1, 0, 2) * 1e3, u.transpose(1, 0, 2) * 1e3, "px",
+                                                "camera 4", block_px=8),
+               "rig": rig_figure(cams, box, {8}, [(np.linalg.norm(u, axis=-1), "|displacement| [px]")] * 9),
+               "rig, no pictures": rig_figure(cams, box, {8}, [None] * 9)}
+    for name, fig in figures.items():
+        renderer = fig.canvas.get_renderer()
+        page = Bbox.from_bounds(0, 0, *fig.canvas.get_width_height()).padded(1.0)
+        extents = [ax.get_tightbbox(renderer) for ax in fig.axes]
+        for ax, e in zip(fig.axes, extents):
+            assert page.containsx(e.x0) and page.containsx(e.x1) and page.containsy(e.y0) and page.containsy(e.y1), (
+                name, ax.get_title() or ax.get_label(), e.bounds, page.bounds)
+        for ax in fig.axes:  # a legend below its panel may reach under the next one's labels: not an overlap of theirs
+            if ax.get_legend() is not None:
+                ax.get_legend().set_in_layout(False)
+        panels = [ax.get_tightbbox(renderer) for ax in fig.axes if ax.get_label() != "<colorbar>"]
+        for a in range(len(panels)):
+            for b in range(a + 1, len(panels)):
+                inter = Bbox.intersection(panels[a], panels[b])
+                assert inter is None or inter.width * inter.height < 0.02 * min(
+                    panels[a].width * panels[a].height, panels[b].width * panels[b].height), (name, a, b)

@@ -26,6 +26,13 @@ HEIGHTS = (0.25, 0.5, 0.75)
 ERROR = "error (rec. - truth)"  # red: too hot, blue: too cold
 
 
+def fixed_margins(fig, left: float, right: float, bottom: float, top: float, wspace: float = 0.25) -> None:
+    """Place ``fig``'s subplots with margins in inches (a constrained layout measures every tick label on each draw:
+    0.6-0.8 s a figure, the largest part of a run's pictures)."""
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h, wspace=wspace)
+
+
 def height_indices(box: ProbeBox) -> list[int]:
     """The y indices of :data:`HEIGHTS` on ``box``: the voxel layer nearest each."""
     ny = box.shape[1]
@@ -145,13 +152,6 @@ def sequence_figure(frames: list[tuple[str, np.ndarray, Optional[np.ndarray]]], 
     if title:
         fig.suptitle(title, fontsize=10)
     return fig
-
-
-def fixed_margins(fig, left: float, right: float, bottom: float, top: float, wspace: float = 0.25) -> None:
-    """Place ``fig``'s subplots with margins in inches (a constrained layout measures every tick label on each draw:
-    0.6-0.8 s a figure, the largest part of a run's pictures)."""
-    w, h = fig.get_size_inches()
-    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h, wspace=wspace)
 
 
 def save_figure(fig, path: Path) -> Path:
@@ -436,8 +436,10 @@ def rig_figure(cameras: list, box: ProbeBox, heldout: set, pictures: list, title
     rows = max(1, -(-len(shown) // cols))
     if shown:
         fig = plt.figure(figsize=(5.5 + 2.4 * cols, max(5.5, 2.9 * rows)))
-        grid = fig.add_gridspec(rows, cols + 2, hspace=0.3)
-        top = fig.add_subplot(grid[:, :2])
+        # the view from above, then the pictures: the gap between them leaves room for the cameras' names
+        outer = fig.add_gridspec(1, 2, width_ratios=(2, cols), wspace=0.2)
+        top = fig.add_subplot(outer[0])
+        grid = outer[1].subgridspec(rows, cols, hspace=0.3, wspace=0.15)
     else:  # no pictures (deflections given): the view from above alone
         fig, top = plt.subplots(figsize=(7.5, 7.5))
     fixed_margins(fig, left=0.9, right=0.2, bottom=0.55, top=0.95, wspace=0.15)  # above: three lines of title
@@ -445,7 +447,7 @@ def rig_figure(cameras: list, box: ProbeBox, heldout: set, pictures: list, title
     h = np.asarray(box.half_mm, dtype=np.float64)
     edges = _box_edges(box)
     for k, v in enumerate(shown):
-        ax = fig.add_subplot(grid[k // cols, 2 + k % cols])
+        ax = fig.add_subplot(grid[k // cols, k % cols])
         image, label = pictures[v]
         ax.imshow(image, cmap="gray" if label == "reference" else "magma")
         cam = cameras[v]
