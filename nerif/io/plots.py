@@ -27,8 +27,8 @@ ERROR = "error (rec. - truth)"  # red: too hot, blue: too cold
 
 
 def fixed_margins(fig, left: float, right: float, bottom: float, top: float, wspace: float = 0.25) -> None:
-    """Place ``fig``'s subplots with margins in inches (a constrained layout measures every tick label on each draw:
-    0.6-0.8 s a figure, the largest part of a run's pictures)."""
+    """Place ``fig``'s subplots with margins in inches: a constrained layout measures every tick label on each draw,
+    0.3-0.5 s of a figure's 0.6-1.1 s (``benchmarks/figures.py``)."""
     w, h = fig.get_size_inches()
     fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h, wspace=wspace)
 
@@ -346,9 +346,7 @@ def measured_figure(reference: np.ndarray, displacement: np.ndarray, left_out: n
     extent = (-0.5, W - 0.5, H - 0.5, -0.5)  # image pixels, row 0 at the top
     height = 4.4 * H / max(W, 1) + 1.0
     fig, axes = plt.subplots(1, 2, figsize=(11.0, height), squeeze=False)
-    # fixed margins in inches (the axis labels below, two title lines above): a constrained layout, measured on
-    # each draw, doubled the second that every view's figure costs
-    fig.subplots_adjust(left=0.06, right=0.93, bottom=0.5 / height, top=1 - 0.62 / height, wspace=0.22)
+    fixed_margins(fig, left=0.66, right=0.77, bottom=0.5, top=0.62, wspace=0.22)  # labels below, two title lines above
     ax = axes[0, 0]
     ax.imshow(reference, cmap="gray", extent=extent, vmin=0, vmax=float(np.max(reference)) or 1.0)
     overlay = np.ma.masked_equal(left_out, 0)
