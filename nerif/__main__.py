@@ -97,14 +97,28 @@ def diverged(e: Exception) -> str:
     return str(e.args[0] if len(e.args) == 1 else e) if isinstance(e, DivergenceError) else ""
 
 
+def refused(args: list[str]) -> Optional[str]:
+    """The sentence for command-line ``args`` refused before Hydra composes anything (an override its grammar
+    cannot read, a group option or setting nerif does not have); None."""
+    return unreadable_override(args) or unknown_override(args)
+
+
+def execute(cfg: DictConfig, overrides: list[str], out_dir, jobs: int = 1) -> dict:
+    """A run of the composed ``cfg`` into ``out_dir``: the command line's ``overrides`` checked by kind, the config
+    by what it alone tells (before the seconds of importing torch and the rest), then :func:`nerif.app.run` with
+    ``jobs`` running at once; its metrics. Bad input raises ``ValueError`` with the one sentence."""
+    check_overrides(cfg, overrides)
+    check_settings(cfg)
+    from nerif.app import run
+
+    return run(cfg, out_dir, jobs)
+
+
 @hydra.main(version_base=None, config_path=str(config_dir()), config_name="config")
 def main(cfg: DictConfig) -> float:
     try:
-        check_overrides(cfg, HydraConfig.get().overrides.task)
-        check_settings(cfg)  # what the config alone tells, before the seconds of importing torch and the rest
-        from nerif.app import run
-
-        metrics = run(cfg, HydraConfig.get().runtime.output_dir, parallel_jobs())
+        metrics = execute(cfg, HydraConfig.get().overrides.task, HydraConfig.get().runtime.output_dir,
+                          parallel_jobs())
     except (ValueError, FileNotFoundError) as e:  # bad input: one sentence
         return stop(str(e.args[0] if len(e.args) == 1 else e))  # an OSError's own: "[Errno 2] ...: 'path'"
     except KeyboardInterrupt as e:
@@ -122,7 +136,7 @@ def main(cfg: DictConfig) -> float:
 def cli() -> None:
     """``python -m nerif``: an override Hydra cannot read is one sentence (Hydra's own is its grammar's), then the
     run."""
-    message = unreadable_override(sys.argv[1:]) or unknown_override(sys.argv[1:])
+    message = refused(sys.argv[1:])
     if message:
         print(f"nerif: {message}", file=sys.stderr)
         sys.exit(2)

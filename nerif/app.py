@@ -19,7 +19,7 @@ from nerif.memory import check_memory
 from nerif.reconstruct import WarningRecords, reconstruct, resuming
 from nerif.sequence import frames_of, run_sequence
 from nerif.solvers.base import SOLVERS
-from nerif.threads import ThreadTuner, resolve_threads, usable_cores
+from nerif.threads import ThreadTuner, resolve_threads, thread_budget
 
 DEVICES = "auto, cpu, cuda or cuda:N"
 log = logging.getLogger(__name__)
@@ -103,7 +103,7 @@ def run(cfg: DictConfig, out_dir: Path, parallel_jobs: int = 1) -> dict:
     torch.set_num_threads(threads)
     tuner = None
     if cfg.threads == "auto" and parallel_jobs <= 1 and device.type == "cpu":
-        tuner = ThreadTuner(usable_cores(), torch.set_num_threads)
+        tuner = ThreadTuner(thread_budget(), torch.set_num_threads)
         tuner.start(threads)
     retain_freed_memory()
     check_outside_capture(cfg, out_dir)

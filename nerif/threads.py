@@ -29,6 +29,14 @@ def usable_cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+def thread_budget() -> int:
+    """The most CPU threads a run may use: the usable cores (:func:`usable_cores`), capped by ``OMP_NUM_THREADS``
+    where it is set (a scheduler's or a shell's share of the machine)."""
+    cores = usable_cores()
+    cap = os.environ.get("OMP_NUM_THREADS", "")
+    return max(1, min(cores, int(cap))) if cap.isdigit() else cores
+
+
 def _cpu_times() -> Optional[dict[int, tuple[float, float]]]:
     """Per core of the machine, (busy, total) jiffies since boot, from ``/proc/stat``; None where there is none."""
     try:
@@ -62,16 +70,15 @@ def busy_cores(interval_s: float = 0.2) -> float:
 
 def resolve_threads(setting, parallel_jobs: int = 1) -> int:
     """CPU threads a run starts with: ``auto`` = the usable cores less those other processes keep busy now, for a
-    job alone (``OMP_NUM_THREADS``, where set, caps it); the usable cores shared evenly by ``parallel_jobs`` jobs
-    running at once; or a positive number (at most the usable cores). One sentence for anything else."""
+    job alone; :func:`thread_budget` shared evenly by ``parallel_jobs`` jobs running at once (either at most
+    ``OMP_NUM_THREADS``, where set); or a positive number (at most the usable cores). One sentence for anything
+    else."""
     cores = usable_cores()
     if setting == "auto":
+        budget = thread_budget()
         if parallel_jobs > 1:
-            return max(1, cores // parallel_jobs)
-        free = max(1, min(cores, round(cores - busy_cores())))
-        if os.environ.get("OMP_NUM_THREADS", "").isdigit():
-            free = max(1, min(free, int(os.environ["OMP_NUM_THREADS"])))
-        return free
+            return max(1, budget // parallel_jobs)
+        return max(1, min(budget, round(cores - busy_cores())))
     if isinstance(setting, bool) or not isinstance(setting, int) or setting < 1:
         raise ValueError(f"threads={setting}: auto or a number of CPU threads (at least 1)")
     if setting > cores:  # more threads than cores only wait on each other (38x slower with 1000 on 2 cores)

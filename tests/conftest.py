@@ -16,6 +16,9 @@ if os.environ.get("PYTEST_XDIST_WORKER_COUNT"):  # pytest -n K: K processes shar
     from tests.helpers import worker_threads
 
     torch.set_num_threads(worker_threads())
+    # the share as a scheduler states it, for the runs left at threads=auto (and the Pythons they start): without it
+    # a run here times its steps at counts the other processes' share (the default scene's test: 41 s, not 29)
+    os.environ["OMP_NUM_THREADS"] = str(worker_threads())
 # torch and nerif are imported where tests run, not here at the top: under -n K pytest's main process reads this
 # file before it starts the workers, and it runs no test (importing them there delayed every worker by 3-4 s)
 

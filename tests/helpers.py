@@ -79,6 +79,24 @@ def shared_data(name: str) -> Path:
     return path
 
 
+def refusal(*args, out_dir) -> str:
+    """The one sentence ``python -m nerif ARGS`` refuses bad ``args`` with ('' where the run went ahead into
+    ``out_dir``), found by the command's own two steps (:func:`nerif.__main__.refused`, then
+    :func:`nerif.__main__.execute`) on the config composed once a process for its group choices
+    (:func:`nerif.configs.compose`), not by Hydra's two composes of every yaml a run (0.7 s). That the command
+    says it without a traceback and exits with status 2: :func:`nerif_here` and a new Python."""
+    from nerif.__main__ import execute, refused
+
+    said = refused(list(args))
+    if said:
+        return said
+    try:
+        execute(compose(list(args)), list(args), out_dir)
+    except ValueError as e:
+        return str(e.args[0] if len(e.args) == 1 else e)
+    return ""
+
+
 def nerif_here(*args, cwd=ROOT) -> subprocess.CompletedProcess:
     """``python -m nerif ARGS`` in this process (no 6-8 s of imports): ``sys.argv`` set, what it prints captured,
     the status its ``SystemExit`` carries (0 where it returns). Hydra's state and the logging handlers it installs

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 
-from tests.helpers import TINY, nerif_here, tiny_config
+from tests.helpers import TINY, nerif_here, refusal, tiny_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -181,8 +181,6 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("data.sensor.noise_varance=1e-4", "data.sensor.noise_varance: not a setting nerif knows (did you mean "
                                        "data.sensor.noise_variance?)"),
     ("trian.iterations=3", "trian.iterations: not a setting nerif knows (did you mean train.iterations?)"),
-    # a group that may only be added, given as a choice beside a setting: Hydra's sentence, not a traceback
-    ("experiment=paper_phantom5 train.iterations=2", "To append to your default list use +experiment=paper_phantom5"),
     ("train.iterations=abc", "train.iterations=abc: a number (its default: 1200)"),  # issue 38: by kind
     ("seed=abc", "seed=abc: a number (its default: 0)"),
     ("field.hidden=64", "field.hidden=64: a list (its default: [64, 64])"),
@@ -200,6 +198,17 @@ def test_solvers_are_interchangeable_in_a_multirun(tmp_path):
     ("phantom.T_peak=150", "colder than ambient (296.15 K) by more than the field can represent"),  # not "T_max"
 ])
 def test_bad_input_fails_with_one_clear_sentence(tmp_path, override, message):
+    assert message in refusal(*TINY, *override.split(), out_dir=tmp_path)
+    assert not (tmp_path / "checkpoint.pt").exists()
+
+
+@pytest.mark.parametrize("override, message", [
+    # a group that may only be added, given as a choice beside a setting: Hydra's sentence, not a traceback
+    ("experiment=paper_phantom5 train.iterations=2", "To append to your default list use +experiment=paper_phantom5"),
+    ("phantom.T_peak=150", "colder than ambient (296.15 K) by more than the field can represent"),  # after torch
+    ("+seeds=3", "seeds: not a setting nerif knows (did you mean seed?)"),  # before Hydra
+])
+def test_the_command_says_bad_input_in_one_sentence_without_a_traceback(tmp_path, override, message):
     r = nerif_here(*TINY, *override.split(), f"hydra.run.dir={tmp_path}")
     assert r.returncode != 0
     assert message in r.stderr + r.stdout

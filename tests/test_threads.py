@@ -5,7 +5,7 @@ import time
 
 import pytest
 
-from nerif.threads import ThreadTuner, busy_cores, resolve_threads, usable_cores
+from nerif.threads import ThreadTuner, busy_cores, resolve_threads, thread_budget, usable_cores
 
 
 class Machine:
@@ -106,3 +106,14 @@ def test_a_near_tie_keeps_the_count_it_has():
     m.times["idle"] = {2: 0.0275, 1: 0.0285}  # now 2 threads are 3.5 % faster: within the margin
     m.run(tuner, 400)
     assert tuner.kept == 1 and [n for _, n in tuner.switches] == [1]
+
+
+def test_omp_num_threads_caps_auto_and_the_tuner(monkeypatch):
+    """A scheduler's share (``OMP_NUM_THREADS``) bounds what ``auto`` starts with and what the tuner tries."""
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    assert thread_budget() == 1 and resolve_threads("auto") == 1 and resolve_threads("auto", parallel_jobs=4) == 1
+    assert not ThreadTuner(thread_budget(), lambda n: pytest.fail("one thread has nothing to tune")).enabled
+    monkeypatch.setenv("OMP_NUM_THREADS", "999")
+    assert thread_budget() == usable_cores()
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    assert thread_budget() == usable_cores()
