@@ -1,4 +1,5 @@
-"""Multirun summary: one table (markdown and CSV) of every job's metrics, written beside the runs."""
+"""Multirun summary: one table (markdown and CSV) of every job's metrics, written beside the runs; the idle workers a
+sweep leaves, ended."""
 from __future__ import annotations
 
 import csv
@@ -97,3 +98,15 @@ class MultirunSummary(Callback):
             log.error("%d of %d jobs failed (%s); see %s", len(failed), len(rows), "; ".join(failed),
                       sweep_dir / "summary.md")
             sys.exit(1)
+
+
+class IdleWorkersEnd(Callback):
+    """Hydra callback: after a multirun through the joblib launcher, its idle worker processes are ended at once (left
+    to the interpreter's exit, each a Python holding torch, they kept the prompt 3 s after the summary). Listed after
+    :class:`MultirunSummary`, it runs before it (Hydra calls the end hooks in reverse)."""
+
+    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        loky = sys.modules.get("joblib.externals.loky.reusable_executor")  # imported only where a sweep used it
+        executor = getattr(loky, "_executor", None)
+        if executor is not None:
+            executor.shutdown(wait=True, kill_workers=True)
