@@ -74,3 +74,13 @@ def written(tmp_path_factory):
     scene = DATASETS.build(OmegaConf.to_container(cfg.data, resolve=True), device="cpu")
     root = write_capture(scene, tmp_path_factory.mktemp("capture"))
     return root, scene, cfg
+
+
+def pytest_collection_finish(session):
+    """What collecting imported (torch, nerif, the test modules: most of a process's objects) moved out of the
+    garbage collector's sight: its full collections during the runs and the five at the session's end (pytest's,
+    for unraisable exceptions) walk only what the tests made."""
+    import gc
+
+    gc.collect()
+    gc.freeze()
