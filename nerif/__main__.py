@@ -90,11 +90,16 @@ def interrupted(e: KeyboardInterrupt) -> None:
     sys.exit(128 + int(number))
 
 
+def sentence(e: Exception) -> str:
+    """The one sentence bad input raised: its message (an ``OSError``'s own: "[Errno 2] ...: 'path'")."""
+    return str(e.args[0] if len(e.args) == 1 else e)
+
+
 def diverged(e: Exception) -> str:
     """The one sentence of a run whose loss diverged (:class:`nerif.solvers.DivergenceError`), else ""."""
     from nerif.solvers import DivergenceError
 
-    return str(e.args[0] if len(e.args) == 1 else e) if isinstance(e, DivergenceError) else ""
+    return sentence(e) if isinstance(e, DivergenceError) else ""
 
 
 def refused(args: list[str]) -> Optional[str]:
@@ -103,10 +108,11 @@ def refused(args: list[str]) -> Optional[str]:
     return unreadable_override(args) or unknown_override(args)
 
 
-def execute(cfg: DictConfig, overrides: list[str], out_dir, jobs: int = 1) -> dict:
+def execute(cfg: DictConfig, overrides: list[str], out_dir: Path, jobs: int = 1) -> dict:
     """A run of the composed ``cfg`` into ``out_dir``: the command line's ``overrides`` checked by kind, the config
     by what it alone tells (before the seconds of importing torch and the rest), then :func:`nerif.app.run` with
-    ``jobs`` running at once; its metrics. Bad input raises ``ValueError`` with the one sentence."""
+    ``jobs`` running at once; its metrics. Bad input raises ``ValueError`` (or ``FileNotFoundError``) with the one
+    sentence (:func:`sentence`)."""
     check_overrides(cfg, overrides)
     check_settings(cfg)
     from nerif.app import run
@@ -120,7 +126,7 @@ def main(cfg: DictConfig) -> float:
         metrics = execute(cfg, HydraConfig.get().overrides.task, HydraConfig.get().runtime.output_dir,
                           parallel_jobs())
     except (ValueError, FileNotFoundError) as e:  # bad input: one sentence
-        return stop(str(e.args[0] if len(e.args) == 1 else e))  # an OSError's own: "[Errno 2] ...: 'path'"
+        return stop(sentence(e))
     except KeyboardInterrupt as e:
         interrupted(e)
     except Exception as e:  # a diverged run, and anything else, is one sentence too; the traceback with debug=true

@@ -85,15 +85,15 @@ def refusal(*args, out_dir) -> str:
     :func:`nerif.__main__.execute`) on the config composed once a process for its group choices
     (:func:`nerif.configs.compose`), not by Hydra's two composes of every yaml a run (0.7 s). That the command
     says it without a traceback and exits with status 2: :func:`nerif_here` and a new Python."""
-    from nerif.__main__ import execute, refused
+    from nerif.__main__ import execute, refused, sentence
 
     said = refused(list(args))
     if said:
         return said
     try:
         execute(compose(list(args)), list(args), out_dir)
-    except ValueError as e:
-        return str(e.args[0] if len(e.args) == 1 else e)
+    except (ValueError, FileNotFoundError) as e:  # what the command says as bad input
+        return sentence(e)
     return ""
 
 
