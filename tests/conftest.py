@@ -79,8 +79,11 @@ def written(tmp_path_factory):
 def pytest_collection_finish(session):
     """What collecting imported (torch, nerif, the test modules: most of a process's objects) moved out of the
     garbage collector's sight: its full collections during the runs and the five at the session's end (pytest's,
-    for unraisable exceptions) walk only what the tests made."""
+    for unraisable exceptions) walk only what the tests made. Put back at exit, so that the interpreter's last
+    collection frees it (left frozen, Triton's bindings report their objects as leaked)."""
+    import atexit
     import gc
 
     gc.collect()
     gc.freeze()
+    atexit.register(gc.unfreeze)
