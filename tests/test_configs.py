@@ -166,6 +166,7 @@ def test_a_new_encoder_is_one_module_and_one_yaml(tmp_path, monkeypatch):
     (tmp_path / "pkg" / "toy.py").write_text(TOY)
     (tmp_path / "conf" / "encoder").mkdir(parents=True)
     (tmp_path / "conf" / "encoder" / "toy.yaml").write_text("name: toy\npower: 3\n")
+    ENCODERS.discover()  # every encoder registered before the copy: one first imported here would be lost after
     monkeypatch.setattr(nerif.encoders, "__path__", [*nerif.encoders.__path__, str(tmp_path / "pkg")])
     monkeypatch.setattr(ENCODERS, "_entries", dict(ENCODERS._entries))
     try:
